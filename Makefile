@@ -1,0 +1,43 @@
+# One obvious way to run things. Every target creates or reuses the local virtual environment.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed-stamp
+DATA ?= 4V_xmotion.mcap
+FIT_ARGS ?=
+
+.PHONY: venv test lint format fit bench datasets reproduce clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+test: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check hframe_id tests
+	$(BIN)/ruff format --check hframe_id tests
+
+format: $(STAMP)
+	$(BIN)/ruff format hframe_id tests
+	$(BIN)/ruff check --fix hframe_id tests
+
+fit: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/hframe-id fit $(DATA) $(FIT_ARGS)
+
+bench: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m hframe_id.bench
+
+datasets: $(STAMP)
+	$(BIN)/hframe-id datasets make --out datasets
+
+reproduce: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/hframe-id reproduce --out reports/reproduction
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

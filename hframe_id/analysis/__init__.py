@@ -1,0 +1,1 @@
+"""Linear analysis of the models about rest."""

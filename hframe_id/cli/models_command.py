@@ -1,0 +1,47 @@
+"""``hframe-id models``: list the model variants with their states, inputs, outputs, parameters."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from hframe_id.models import VARIANTS, build_model, parameter_specs
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "models",
+        help="list model variants and their signals and parameters",
+        description="List the model variants with their states, inputs, outputs and "
+        "parameters (names with SI units).",
+    )
+    parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+    parser.set_defaults(handler=run)
+
+
+def describe(variant: str) -> dict:
+    model = build_model(variant)
+    return {
+        "variant": variant,
+        "description": model.description,
+        "states": [s.label for s in model.states],
+        "inputs": [s.label for s in model.inputs],
+        "outputs": [s.label for s in model.outputs],
+        "parameters": [
+            spec.key + ("" if spec.required else " (position-dependent stiffness only)")
+            for spec in parameter_specs(variant)
+        ],
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    described = [describe(v) for v in VARIANTS]
+    if args.json:
+        print(json.dumps(described, indent=2))
+        return 0
+    for item in described:
+        print(f"{item['variant']}: {item['description']}")
+        for field in ("states", "inputs", "outputs", "parameters"):
+            print(f"  {field}: {', '.join(item[field])}")
+        print()
+    return 0

@@ -1,0 +1,245 @@
+"""Parameter files: a header plus every parameter value with its unit in its key.
+
+Format (YAML, format_version 1.x)::
+
+    format_version: "1.0"
+    model: hframe-8                      # model variant
+    title: H-frame 8th-order model, linear
+    source: Sollmann 2007, Table 4.1     # where the values come from
+    references: [...]                    # optional, list of strings
+    notes: "..."                         # optional
+    provenance: {...}                    # optional mapping (fits: id, data, solver, ...)
+    uncertainty: {...}                   # optional mapping (fits: per-parameter statistics)
+    parameters:
+      "r [m]": 0.0194
+      "k_l [N/m]": 13167.0
+      ...
+
+Values are SI. Loading is strict: unknown keys (with the nearest valid one suggested),
+missing keys, non-finite or non-physical values, a wrong model variant and an unknown format
+version are ``ParameterFileError`` naming the file, the key and the value. Saving writes a
+temporary file and renames it, so a failed save never leaves half a file.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hframe_id.errors import ModelError, ParameterFileError
+from hframe_id.models import VARIANTS, parameter_specs
+
+FORMAT_VERSION = "1.0"
+SUPPORTED_MAJOR = 1
+
+_REQUIRED_HEADER = ("format_version", "model", "title", "source", "parameters")
+_OPTIONAL_HEADER = ("references", "notes", "provenance", "uncertainty")
+
+
+@dataclass
+class ParameterSet:
+    """SI parameter values of one model variant, with the file header that describes them."""
+
+    variant: str
+    values: dict[str, float]
+    title: str
+    source: str
+    references: list[str] = field(default_factory=list)
+    notes: str = ""
+    provenance: dict[str, Any] = field(default_factory=dict)
+    uncertainty: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    def __post_init__(self) -> None:
+        check_values(self.variant, self.values, self.path)
+
+    def replace_values(self, **changes: float) -> ParameterSet:
+        """A copy with some values changed (validated)."""
+        values = dict(self.values)
+        unknown = [name for name in changes if name not in values]
+        if unknown:
+            raise ParameterFileError(
+                f"{self.where()}: no parameter(s) {', '.join(unknown)} in {self.variant}"
+            )
+        values.update({k: float(v) for k, v in changes.items()})
+        return ParameterSet(
+            self.variant, values, self.title, self.source, list(self.references), self.notes
+        )
+
+    def where(self) -> str:
+        return str(self.path) if self.path else f"<{self.variant} parameters>"
+
+
+def _suggest(word: str, choices: list[str]) -> str:
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.5)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def check_values(variant: str, values: Mapping[str, float], path: Path | None = None) -> None:
+    """Validate SI values by parameter name: all required present, none unknown, physical."""
+    where = str(path) if path else f"<{variant} parameters>"
+    try:
+        specs = {spec.name: spec for spec in parameter_specs(variant)}
+    except ModelError as err:
+        raise ParameterFileError(f"{where}: {err}") from None
+    for name in values:
+        if name not in specs:
+            raise ParameterFileError(
+                f"{where}: unknown parameter {name!r}{_suggest(name, list(specs))}"
+            )
+    for spec in specs.values():
+        if spec.required and spec.name not in values:
+            raise ParameterFileError(f"{where}: missing parameter {spec.key!r}")
+    for name, value in values.items():
+        spec = specs[name]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ParameterFileError(f"{where}: {spec.key} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ParameterFileError(f"{where}: {spec.key} must be finite, got {value!r}")
+        if spec.kind == "positive" and value <= 0:
+            raise ParameterFileError(f"{where}: {spec.key} must be > 0, got {value!r}")
+        if spec.kind == "nonnegative" and value < 0:
+            raise ParameterFileError(f"{where}: {spec.key} must be >= 0, got {value!r}")
+
+
+def _check_format_version(raw: Any, where: str) -> None:
+    text = str(raw)
+    major = text.split(".")[0]
+    if not major.isdigit():
+        raise ParameterFileError(f"{where}: format_version must look like '1.0', got {raw!r}")
+    if int(major) != SUPPORTED_MAJOR:
+        raise ParameterFileError(
+            f"{where}: unknown format_version {raw!r}; this hframe-id reads "
+            f"{SUPPORTED_MAJOR}.x files"
+        )
+
+
+def _values_from_keys(variant: str, raw: Any, where: str) -> dict[str, float]:
+    if not isinstance(raw, Mapping):
+        raise ParameterFileError(f"{where}: 'parameters' must be a mapping of 'name [unit]': value")
+    by_key = {spec.key: spec for spec in parameter_specs(variant)}
+    values = {}
+    for key, value in raw.items():
+        if key not in by_key:
+            raise ParameterFileError(
+                f"{where}: unknown parameter key {key!r}{_suggest(str(key), list(by_key))}"
+                f" for model {variant}"
+            )
+        values[by_key[key].name] = value
+    return values
+
+
+def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> ParameterSet:
+    """Load and validate a parameter file.
+
+    Parameters
+    ----------
+    path : the YAML file.
+    variant : if given, the file must describe this model variant.
+    """
+    path = Path(path)
+    where = str(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ParameterFileError(f"{where}: no such parameter file") from None
+    except OSError as err:
+        raise ParameterFileError(f"{where}: cannot read ({err.strerror})") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ParameterFileError(f"{where}: not valid YAML ({err})") from None
+    if not isinstance(doc, Mapping):
+        raise ParameterFileError(f"{where}: expected a YAML mapping with a header, got {doc!r}")
+    allowed = _REQUIRED_HEADER + _OPTIONAL_HEADER
+    for key in doc:
+        if key not in allowed:
+            raise ParameterFileError(
+                f"{where}: unknown header key {key!r}{_suggest(str(key), list(allowed))}"
+            )
+    for key in _REQUIRED_HEADER:
+        if key not in doc:
+            raise ParameterFileError(f"{where}: missing header key {key!r}")
+    _check_format_version(doc["format_version"], where)
+    model = doc["model"]
+    if model not in VARIANTS:
+        raise ParameterFileError(
+            f"{where}: model {model!r} is not a variant{_suggest(str(model), list(VARIANTS))};"
+            f" valid: {', '.join(VARIANTS)}"
+        )
+    if variant is not None and model != variant:
+        raise ParameterFileError(f"{where}: model is {model!r}, but {variant!r} is needed here")
+    for key in ("references",):
+        if key in doc and not isinstance(doc[key], list):
+            raise ParameterFileError(f"{where}: {key!r} must be a list")
+    for key in ("provenance", "uncertainty"):
+        if key in doc and not isinstance(doc[key], Mapping):
+            raise ParameterFileError(f"{where}: {key!r} must be a mapping")
+    values = _values_from_keys(model, doc["parameters"], where)
+    return ParameterSet(
+        variant=model,
+        values=values,
+        title=str(doc["title"]),
+        source=str(doc["source"]),
+        references=list(doc.get("references", [])),
+        notes=str(doc.get("notes", "")),
+        provenance=dict(doc.get("provenance", {})),
+        uncertainty=dict(doc.get("uncertainty", {})),
+        path=path,
+    )
+
+
+def to_document(params: ParameterSet) -> dict[str, Any]:
+    """The YAML document of a parameter set (header first, values keyed 'name [unit]')."""
+    check_values(params.variant, params.values, params.path)
+    doc: dict[str, Any] = {
+        "format_version": FORMAT_VERSION,
+        "model": params.variant,
+        "title": params.title,
+        "source": params.source,
+    }
+    if params.references:
+        doc["references"] = list(params.references)
+    if params.notes:
+        doc["notes"] = params.notes
+    if params.provenance:
+        doc["provenance"] = params.provenance
+    if params.uncertainty:
+        doc["uncertainty"] = params.uncertainty
+    doc["parameters"] = {
+        spec.key: float(params.values[spec.name])
+        for spec in parameter_specs(params.variant)
+        if spec.name in params.values
+    }
+    return doc
+
+
+def save_parameter_file(
+    params: ParameterSet, path: str | os.PathLike, overwrite: bool = False
+) -> Path:
+    """Write a parameter file atomically (temporary file, then rename).
+
+    Refuses to replace an existing file unless ``overwrite`` is true.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise ParameterFileError(f"{path}: exists already; refusing to overwrite it")
+    text = yaml.safe_dump(to_document(params), sort_keys=False, allow_unicode=True, width=100)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

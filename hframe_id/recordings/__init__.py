@@ -1,0 +1,1 @@
+"""Recordings: the MCAP log format, its reader and writer, rigs and the logger."""
