@@ -85,7 +85,9 @@ def _position(names: tuple[str, ...], name: str, kind: str) -> int:
 
 
 def _sorted(values: np.ndarray) -> np.ndarray:
-    cleaned = np.where(np.abs(values.imag) < 1e-9 * np.maximum(1, np.abs(values)), values.real, values)
+    cleaned = np.where(
+        np.abs(values.imag) < 1e-9 * np.maximum(1, np.abs(values)), values.real, values
+    )
     cleaned = np.where(np.abs(cleaned) < 1e-9, 0, cleaned)
     return np.array(sorted(cleaned, key=lambda z: (-abs(z.imag), z.real, z.imag)), dtype=complex)
 
@@ -115,11 +117,17 @@ def linearize(params: ParameterSet, model: Model | None = None) -> LinearModel:
     u = ca.SX.sym("u", model.n_inputs)
     xdot = model.f(x, u, p)
     y = model.output(x)
-    jac = ca.Function("linearization", [x, u], [ca.jacobian(xdot, x), ca.jacobian(xdot, u),
-                                      ca.jacobian(y, x), ca.jacobian(y, u)])
+    jac = ca.Function(
+        "linearization",
+        [x, u],
+        [ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x), ca.jacobian(y, u)],
+    )
     A, B, C, D = (np.array(m) for m in jac(np.zeros(model.n_states), np.zeros(model.n_inputs)))
     return LinearModel(
-        A, B, C, D,
+        A,
+        B,
+        C,
+        D,
         tuple(s.name for s in model.states),
         tuple(s.name for s in model.inputs),
         tuple(s.name for s in model.outputs),

@@ -15,8 +15,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hframe_id.bench")
     parser.add_argument("sections", nargs="*", metavar="SECTION", help=f"one of {SECTIONS}")
     args = parser.parse_args(argv)
-    print(f"# hframe-id benchmarks ({platform.processor() or platform.machine()}, "
-          f"Python {platform.python_version()})")
+    print(
+        f"# hframe-id benchmarks ({platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()})"
+    )
     unknown = [name for name in args.sections if name not in SECTIONS]
     if unknown:
         parser.error(f"unknown section(s) {unknown}; valid: {', '.join(SECTIONS)}")

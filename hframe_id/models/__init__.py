@@ -30,9 +30,7 @@ def _variant_module(variant: str) -> ModuleType:
     if variant not in _VARIANTS:
         close = difflib.get_close_matches(str(variant), VARIANTS, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ModelError(
-            f"unknown model variant {variant!r}{hint}; valid: {', '.join(VARIANTS)}"
-        )
+        raise ModelError(f"unknown model variant {variant!r}{hint}; valid: {', '.join(VARIANTS)}")
     return _VARIANTS[variant]
 
 
@@ -47,9 +45,7 @@ def build_model(variant: str, options: ModelOptions | None = None) -> Model:
     module = _variant_module(variant)
     options = options or ModelOptions()
     used = tuple(
-        spec
-        for spec in module.PARAMETERS
-        if spec.required or options.position_dependent_stiffness
+        spec for spec in module.PARAMETERS if spec.required or options.position_dependent_stiffness
     )
     return freeze(
         module.NAME,

@@ -114,4 +114,3 @@ def lagrangian(p: dict[str, ca.SX], u: ca.SX, options: ModelOptions) -> Lagrangi
         *(Friction(f"phi{i}", f"B_{i}", f"tau_c{i}") for i in PULLEYS),
     )
     return LagrangianSystem(COORDINATES, q, qdot, kinetic, potential, actuation, frictions)
-

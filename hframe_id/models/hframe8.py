@@ -110,4 +110,3 @@ def lagrangian(p: dict[str, ca.SX], u: ca.SX, options: ModelOptions) -> Lagrangi
         Friction("phi2", "B_M2", "tau_cM2"),
     )
     return LagrangianSystem(COORDINATES, q, qdot, kinetic, potential, actuation, frictions)
-

@@ -70,8 +70,7 @@ def friction_forces(
         v_s = smoothing[0] if unit == "m" else smoothing[1]
         rate = system.qdot[j]
         forces[j] = -(
-            parameters[friction.viscous] * rate
-            + parameters[friction.coulomb] * ca.tanh(rate / v_s)
+            parameters[friction.viscous] * rate + parameters[friction.coulomb] * ca.tanh(rate / v_s)
         )
     return ca.vertcat(*forces)
 

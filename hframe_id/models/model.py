@@ -120,8 +120,11 @@ def freeze(
         f=f,
         output=ca.Function("output", [x], [y], ["x"], ["y"]),
         energy=ca.Function(
-            "energy", [x, p], [system.kinetic_energy, system.potential_energy],
-            ["x", "p"], ["T", "V"],
+            "energy",
+            [x, p],
+            [system.kinetic_energy, system.potential_energy],
+            ["x", "p"],
+            ["T", "V"],
         ),
         mass=ca.Function("mass", [p], [mass_matrix(system)], ["p"], ["M"]),
     )

@@ -51,9 +51,7 @@ INPUTS = (Signal("u1", "V", "commanded motor voltage"),)
 OUTPUTS = ("phi1", "x")
 
 
-def lagrangian(
-    p: dict[str, ca.SX], u: ca.SX, options: ModelOptions
-) -> LagrangianSystem:
+def lagrangian(p: dict[str, ca.SX], u: ca.SX, options: ModelOptions) -> LagrangianSystem:
     """Energies and forces of the one-axis drive (eq. 2.1-2.4 derived, not copied)."""
     if options.position_dependent_stiffness:
         raise ModelError("position_dependent_stiffness is only available for H-frame models")
