@@ -13,10 +13,22 @@ import sys
 from collections.abc import Sequence
 
 from hframe_id import __version__
-from hframe_id.cli import models_command
+from hframe_id.cli import (
+    export_command,
+    linearize_command,
+    models_command,
+    params_command,
+    reduce_command,
+)
 from hframe_id.errors import HframeIdError
 
-COMMAND_MODULES = (models_command,)
+COMMAND_MODULES = (
+    models_command,
+    params_command,
+    linearize_command,
+    export_command,
+    reduce_command,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,84 @@
+"""``hframe-id params show|check FILE``: print a parameter file as a table, or validate it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from hframe_id.analysis.export import parameter_rows
+from hframe_id.errors import HframeIdError
+from hframe_id.parameters import ParameterSet, load_parameter_file
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "params",
+        help="show or check parameter files",
+        description="Show a parameter file as a table (name, unit, value, description) or "
+        "check that parameter files are valid.",
+    )
+    actions = parser.add_subparsers(dest="params_action", metavar="ACTION", required=True)
+    show = actions.add_parser(
+        "show",
+        help="print a parameter file as a readable table",
+        description="Print the header and every parameter (name, SI unit, value, description).",
+    )
+    show.add_argument("file", metavar="FILE", help="parameter file (YAML)")
+    show.set_defaults(handler=run_show)
+    check = actions.add_parser(
+        "check",
+        help="validate parameter files (exit 0 if all are valid, 2 otherwise)",
+        description="Load and validate each file strictly; print one line per file.",
+    )
+    check.add_argument("files", metavar="FILE", nargs="+", help="parameter file(s) (YAML)")
+    check.set_defaults(handler=run_check)
+
+
+def format_table(params: ParameterSet) -> str:
+    """The header lines and the parameter table of a parameter set."""
+    header = [
+        ("file", str(params.path) if params.path else "-"),
+        ("model", params.variant),
+        ("title", params.title),
+        ("source", params.source),
+    ]
+    header += [("reference", ref) for ref in params.references]
+    if params.notes:
+        header.append(("notes", params.notes))
+    for key, value in params.provenance.items():
+        header.append((f"provenance.{key}", str(value)))
+    lines = [f"{key}: {value}" for key, value in header]
+    rows = [
+        (row["name"], row["unit"], repr(row["value"]), row["description"])
+        for row in parameter_rows(params)
+    ]
+    titles = ("name", "unit", "value", "description")
+    widths = [max(len(t), *(len(r[i]) for r in rows)) for i, t in enumerate(titles)]
+
+    def line(cells: tuple[str, ...]) -> str:
+        name, unit, value, description = cells
+        return (
+            f"{name:<{widths[0]}}  {unit:<{widths[1]}}  {value:>{widths[2]}}  {description}"
+        ).rstrip()
+
+    lines += ["", line(titles), line(tuple("-" * w for w in widths))]
+    lines += [line(row) for row in rows]
+    return "\n".join(lines)
+
+
+def run_show(args: argparse.Namespace) -> int:
+    print(format_table(load_parameter_file(args.file)))
+    return 0
+
+
+def run_check(args: argparse.Namespace) -> int:
+    failed = 0
+    for path in args.files:
+        try:
+            params = load_parameter_file(path)
+        except HframeIdError as err:
+            print(f"hframe-id: error: {err}", file=sys.stderr)
+            failed += 1
+            continue
+        print(f"{path}: ok ({params.variant}, {len(params.values)} parameters)")
+    return 2 if failed else 0
