@@ -87,7 +87,11 @@ FORMATS: dict[str, ExportFormat] = {
             "matlab-script", "statespace", False, ".m", "MATLAB script building sys = ss(...)"
         ),
         ExportFormat(
-            "python-control", "statespace", False, ".py", "Python module with ss() -> control"
+            "python-control",
+            "statespace",
+            False,
+            ".py",
+            "Python module whose ss() returns a python-control StateSpace",
         ),
     )
 }
