@@ -212,11 +212,6 @@ def test_not_yaml(tmp_path, text):
     _expect(path, "not valid YAML", one_line=False)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="files.py embeds PyYAML's multi-line problem description in the error, so the "
-    "command line prints it over several lines; remove this marker when that is fixed",
-)
 def test_not_yaml_error_is_one_line(tmp_path):
     path = tmp_path / "broken.yaml"
     path.write_text("a: b: c\n")

@@ -78,6 +78,13 @@ class ParameterSet:
         return str(self.path) if self.path else f"<{self.variant} parameters>"
 
 
+def _one_line(err: yaml.YAMLError) -> str:
+    """PyYAML's problem and its line/column, on one line."""
+    mark = getattr(err, "problem_mark", None)
+    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+    return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark else problem
+
+
 def _suggest(word: str, choices: list[str]) -> str:
     close = difflib.get_close_matches(word, choices, n=1, cutoff=0.5)
     return f" (did you mean {close[0]!r}?)" if close else ""
@@ -130,8 +137,8 @@ def _values_from_keys(variant: str, raw: Any, where: str) -> dict[str, float]:
     for key, value in raw.items():
         if key not in by_key:
             raise ParameterFileError(
-                f"{where}: unknown parameter key {key!r}{_suggest(str(key), list(by_key))}"
-                f" for model {variant}"
+                f"{where}: unknown parameter key {key!r} (value {value!r})"
+                f"{_suggest(str(key), list(by_key))} for model {variant}"
             )
         values[by_key[key].name] = value
     return values
@@ -156,7 +163,7 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise ParameterFileError(f"{where}: not valid YAML ({err})") from None
+        raise ParameterFileError(f"{where}: not valid YAML ({_one_line(err)})") from None
     if not isinstance(doc, Mapping):
         raise ParameterFileError(f"{where}: expected a YAML mapping with a header, got {doc!r}")
     allowed = _REQUIRED_HEADER + _OPTIONAL_HEADER
