@@ -51,6 +51,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except HframeIdError as err:
         print(f"hframe-id: error: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print("hframe-id: interrupted", file=sys.stderr)
         return 130
