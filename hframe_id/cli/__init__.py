@@ -14,10 +14,13 @@ from collections.abc import Sequence
 
 from hframe_id import __version__
 from hframe_id.cli import (
+    datasets_command,
     export_command,
+    inspect_command,
     linearize_command,
     models_command,
     params_command,
+    record_command,
     reduce_command,
 )
 from hframe_id.errors import HframeIdError
@@ -28,6 +31,9 @@ COMMAND_MODULES = (
     linearize_command,
     export_command,
     reduce_command,
+    record_command,
+    inspect_command,
+    datasets_command,
 )
 
 

@@ -34,8 +34,12 @@ class Recording:
         not holding its last value past its range).
     rig, experiment : the MCAP metadata records (strings parsed to numbers where numeric).
     truth : the plant's parameter set if the recording carries it (sim rig), else None.
-    sequence_gaps : (position, missing count) of each gap in the sequence numbers.
+    sequence_gaps : (position, missing count) of each gap in the sequence numbers; position is
+        the index of the first sample after the gap.
     aborted : True if the run was aborted (limit switch, link fault, user).
+    path : the file it was read from, if any.
+    truncated : True if the file was unfinished (writer killed) and salvaged.
+    events : the run's events (``/rig/event`` messages: kind, reason, sequence, device time).
     """
 
     variant: str
@@ -52,6 +56,8 @@ class Recording:
     sequence_gaps: tuple[tuple[int, int], ...] = ()
     aborted: bool = False
     path: Path | None = None
+    truncated: bool = False
+    events: tuple[dict[str, Any], ...] = ()
 
     @property
     def n_samples(self) -> int:

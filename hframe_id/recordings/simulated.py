@@ -9,7 +9,7 @@ import numpy as np
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-from hframe_id.recordings.sensors import SensorModel
+from hframe_id.recordings.sensors import SensorModel, measure_batch
 from hframe_id.simulation.open_loop import simulate
 
 
@@ -38,21 +38,16 @@ def simulate_recording(
     commanded = np.atleast_2d(np.asarray(voltages, dtype=float))
     applied = sensors.dac(commanded)
     states = simulate(
-        model, model.parameter_vector(params.values), applied, sample_period_s,
+        model,
+        model.parameter_vector(params.values),
+        applied,
+        sample_period_s,
         n_substeps=n_substeps,
     )[:-1]
-    rng = np.random.default_rng(seed)
     true_outputs = np.array(model.output.map(states.shape[0])(states.T)).T
     names = tuple(s.name for s in model.outputs)
-    outputs = np.empty_like(true_outputs)
-    valid = np.ones_like(true_outputs, dtype=bool)
-    for j, name in enumerate(names):
-        if name.startswith("phi"):
-            phase = rng.uniform()
-            counts = sensors.encoder_counts(true_outputs[:, j], phase)
-            outputs[:, j] = counts * sensors.encoder_step_rad
-        else:
-            outputs[:, j], valid[:, j] = sensors.laser(true_outputs[:, j], rng)
+    # Same random draws, in the same order, as the sample-by-sample sim rig (see sensors.py).
+    outputs, valid = measure_batch(sensors, names, true_outputs, np.random.default_rng(seed))
     time_s = np.arange(commanded.shape[0]) * sample_period_s
     return Recording(
         variant=params.variant,

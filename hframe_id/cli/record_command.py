@@ -1,0 +1,172 @@
+"""``hframe-id record``: run one experiment on a rig (sim or serial) and log it to MCAP."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from hframe_id.errors import OptionError
+from hframe_id.parameters import load_parameter_file
+from hframe_id.rig.logger import RunOptions, run_experiment
+from hframe_id.rig.protocols import PulseProtocol, StepProtocol, load_sequence_csv
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "record",
+        help="run an experiment on a rig and record it (MCAP)",
+        description="Run a voltage protocol on a rig and record every sample to an MCAP file "
+        "(docs/log-format.md). Safety is always on: voltages are clamped to the DAC range; a "
+        "limit switch, a link fault, Ctrl-C or SIGTERM set 0 V and end the run (the file is "
+        "still finished). Exit status 0: completed; 1: aborted.",
+    )
+    rig = parser.add_argument_group("rig")
+    rig.add_argument("--rig", choices=("sim", "serial"), required=True, help="rig backend")
+    rig.add_argument("--params", type=Path, help="sim: plant parameter file (models/*.yaml)")
+    rig.add_argument("--seed", type=int, default=0, help="sim: sensor noise seed (default 0)")
+    rig.add_argument(
+        "--fast",
+        action="store_true",
+        help="sim: run unpaced, as fast as possible (default: real time)",
+    )
+    rig.add_argument("--port", help="serial: device, e.g. /dev/ttyACM0")
+    rig.add_argument(
+        "--baudrate",
+        type=int,
+        default=2_000_000,
+        help="serial: baud rate (ignored by USB CDC; default 2000000)",
+    )
+    rig.add_argument(
+        "--watchdog-ms",
+        type=int,
+        default=50,
+        help="serial: device watchdog, 0 V after this long without a command (default 50)",
+    )
+    rig.add_argument(
+        "--link-timeout",
+        type=float,
+        default=0.1,
+        help="serial: link fault after this long without a sample [s] (default 0.1)",
+    )
+    proto = parser.add_argument_group("protocol")
+    proto.add_argument("--protocol", choices=("step", "pulse", "csv"), default="step")
+    proto.add_argument("--v1", type=float, help="step: motor 1 voltage [V]")
+    proto.add_argument("--v2", type=float, help="step: motor 2 voltage [V] (H-frame)")
+    proto.add_argument("--step", type=float, default=0.5, help="step: duration [s] (0.5)")
+    proto.add_argument("--amplitude", type=float, help="pulse: voltage [V]")
+    proto.add_argument("--width", type=float, default=0.25, help="pulse: duration [s] (0.25)")
+    proto.add_argument("--motor", type=int, default=1, help="pulse: motor (1)")
+    proto.add_argument("--csv", type=Path, help="csv: file with 'time [s],u1 [V][,u2 [V]]'")
+    proto.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="record duration [s] (step/pulse default 1.0; csv: last row + 1 sample)",
+    )
+    proto.add_argument(
+        "--pre-roll",
+        type=float,
+        default=0.05,
+        help="step/pulse: 0 V recorded before the step [s] (0.05)",
+    )
+    out = parser.add_argument_group("output")
+    out.add_argument("--out", type=Path, required=True, help="recording to write (.mcap)")
+    out.add_argument("--overwrite", action="store_true", help="replace an existing recording")
+    out.add_argument("--operator", help="who runs the experiment (default: login name)")
+    out.add_argument("--notes", default="", help="free text for the experiment metadata")
+    out.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.set_defaults(handler=run)
+
+
+def _protocol(args: argparse.Namespace, n_inputs: int):
+    duration = args.duration
+    if args.protocol == "step":
+        if args.v1 is None:
+            raise OptionError("--protocol step needs --v1 (and --v2 on an H-frame)")
+        volts = (args.v1,) if n_inputs == 1 else (args.v1, args.v2)
+        if n_inputs == 1 and args.v2 is not None:
+            raise OptionError("this rig has one motor; drop --v2")
+        if n_inputs == 2 and args.v2 is None:
+            raise OptionError("this rig has two motors; give --v2 as well")
+        return StepProtocol(volts, args.step, 1.0 if duration is None else duration, args.pre_roll)
+    if args.protocol == "pulse":
+        if args.amplitude is None:
+            raise OptionError("--protocol pulse needs --amplitude")
+        return PulseProtocol(
+            args.amplitude,
+            args.width,
+            1.0 if duration is None else duration,
+            args.pre_roll,
+            args.motor,
+            n_inputs,
+        )
+    if args.csv is None:
+        raise OptionError("--protocol csv needs --csv FILE")
+    protocol = load_sequence_csv(args.csv, duration)
+    if protocol.n_inputs != n_inputs:
+        raise OptionError(
+            f"{args.csv}: {protocol.n_inputs} voltage column(s), the rig has {n_inputs} motor(s)"
+        )
+    return protocol
+
+
+def make_rig(args: argparse.Namespace):
+    if args.rig == "sim":
+        from hframe_id.rig.sim import SimRig
+
+        if args.params is None:
+            raise OptionError("--rig sim needs --params (a plant parameter file)")
+        if args.port is not None:
+            raise OptionError("--port is for --rig serial")
+        return SimRig(load_parameter_file(args.params), seed=args.seed, paced=not args.fast)
+    from hframe_id.rig.serial_rig import SerialRig
+
+    if args.port is None:
+        raise OptionError("--rig serial needs --port (e.g. /dev/ttyACM0)")
+    if args.fast or args.params is not None:
+        raise OptionError("--fast and --params are for --rig sim")
+    return SerialRig(
+        args.port,
+        baudrate=args.baudrate,
+        watchdog_ms=args.watchdog_ms,
+        link_timeout_s=args.link_timeout,
+    )
+
+
+def _progress_display(stream):
+    def show(done: int, planned: int, lost: int) -> None:
+        width = 30
+        filled = int(width * min(done, planned) / max(planned, 1))
+        stream.write(
+            f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{planned} samples, lost {lost}"
+        )
+        if done >= planned:
+            stream.write("\n")
+        stream.flush()
+
+    return show
+
+
+def run(args: argparse.Namespace) -> int:
+    rig = make_rig(args)
+    try:
+        protocol = _protocol(args, len(rig.info.inputs))
+        show = None if args.quiet or not sys.stderr.isatty() else _progress_display(sys.stderr)
+        summary = run_experiment(
+            rig,
+            protocol,
+            RunOptions(
+                out=args.out,
+                operator=args.operator,
+                overwrite=args.overwrite,
+                progress=show,
+                notes=args.notes,
+            ),
+        )
+    finally:
+        rig.close()
+    if show is not None and summary.samples < summary.planned_samples:
+        sys.stderr.write("\n")
+    print("\n".join(summary.lines()))
+    return 1 if summary.aborted else 0

@@ -1,0 +1,415 @@
+"""Read and validate recordings of the log format (docs/log-format.md).
+
+``read_log`` walks the MCAP file record by record (it does not trust the summary at the end,
+which a killed writer never wrote) and keeps everything up to the last complete, CRC-valid
+chunk. ``read_recording`` checks that the content is an hframe-id recording (schemas, format
+version, metadata, every sample field, monotonic time, sequence numbers, finite values) and
+returns a ``Recording``.
+
+Problems that make a file unusable raise ``LogFormatError`` naming the file and what is wrong.
+Problems that leave usable data are warnings: ``TruncatedRecordingWarning`` (the writer was
+killed; says how much was recovered) and ``SequenceGapWarning`` (samples lost on the link).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import tempfile
+import warnings
+import zlib
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
+
+from hframe_id.errors import HframeIdError, LogFormatError
+from hframe_id.models import VARIANTS
+from hframe_id.parameters import ParameterSet, load_parameter_file
+from hframe_id.recordings import log_format as fmt
+from hframe_id.recordings.recording import Recording
+from hframe_id.recordings.sensors import ENCODER_OUTPUTS, LASER_OUTPUTS
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+_RECORD_HEAD = struct.Struct("<BQ")
+
+
+class TruncatedRecordingWarning(UserWarning):
+    """The file ends early (writer killed); the complete chunks were recovered."""
+
+
+class SequenceGapWarning(UserWarning):
+    """Sample sequence numbers skip: samples were lost between the device and the logger."""
+
+
+@dataclass
+class LogContents:
+    """The raw content of an MCAP file, as far as it could be read.
+
+    Attributes
+    ----------
+    complete : the file was finished (data end record, footer and closing magic present).
+    problem : why reading stopped early (None if complete).
+    chunks : complete chunks read.
+    bytes_read, bytes_total : how far into the file the recovered records reach.
+    messages : per topic, a list of (log_time [ns], payload bytes).
+    """
+
+    path: Path
+    library: str = ""
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, Attachment] = field(default_factory=dict)
+    messages: dict[str, list[tuple[int, bytes]]] = field(default_factory=dict)
+    complete: bool = False
+    problem: str | None = None
+    chunks: int = 0
+    bytes_read: int = 0
+    bytes_total: int = 0
+
+    def channel(self, topic: str) -> Channel | None:
+        for channel in self.channels.values():
+            if channel.topic == topic:
+                return channel
+        return None
+
+    def decoded(self, topic: str) -> list[dict[str, Any]]:
+        """JSON messages of a topic, decoded."""
+        where = self.path
+        out = []
+        for i, (_, data) in enumerate(self.messages.get(topic, [])):
+            try:
+                out.append(json.loads(data))
+            except (ValueError, UnicodeDecodeError) as err:
+                raise LogFormatError(f"{where}: {topic} message {i} is not JSON ({err})") from None
+        return out
+
+
+def read_log(path: str | os.PathLike) -> LogContents:
+    """Read every record up to the end of the file or of its last complete chunk."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise LogFormatError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LogFormatError(f"{path}: is a directory, not a recording") from None
+    except OSError as err:
+        raise LogFormatError(f"{path}: cannot read ({err.strerror})") from None
+    if not data:
+        raise LogFormatError(f"{path}: empty file (0 bytes), not a recording")
+    if not data.startswith(MCAP_MAGIC):
+        raise LogFormatError(f"{path}: not an MCAP file (no MCAP magic bytes at the start)")
+    log = LogContents(path=path, bytes_total=len(data))
+    position = len(MCAP_MAGIC)
+    log.bytes_read = position
+    while True:
+        if position == len(data):
+            log.problem = "file ends without a data-end record and footer"
+            break
+        if position + _RECORD_HEAD.size > len(data):
+            log.problem = f"file ends inside a record header at byte {position}"
+            break
+        opcode, length = _RECORD_HEAD.unpack_from(data, position)
+        start = position + _RECORD_HEAD.size
+        end = start + length
+        if end > len(data):
+            name = Opcode(opcode).name.lower() if opcode in Opcode._value2member_map_ else opcode
+            log.problem = (
+                f"file ends inside a {name} record at byte {position} "
+                f"({len(data) - start} of its {length} bytes present)"
+            )
+            break
+        body = data[start:end]
+        try:
+            if opcode == Opcode.DATA_END:
+                log.complete = data.endswith(MCAP_MAGIC) and len(data) >= end + len(MCAP_MAGIC)
+                if not log.complete:
+                    log.problem = "file ends inside the summary section"
+                log.bytes_read = end
+                break
+            _read_record(log, opcode, body)
+        except Exception as err:  # any corrupt record: keep what came before it
+            log.problem = f"corrupt record at byte {position} ({type(err).__name__}: {err})"
+            break
+        position = end
+        log.bytes_read = end
+    return log
+
+
+def _read_record(log: LogContents, opcode: int, body: bytes) -> None:
+    stream = ReadDataStream(BytesIO(body))
+    if opcode == Opcode.HEADER:
+        log.library = Header.read(stream).library
+    elif opcode == Opcode.CHUNK:
+        chunk = Chunk.read(stream)
+        records = breakup_chunk(chunk, validate_crc=True)  # raises on a corrupt chunk
+        staged = LogContents(path=log.path, schemas=dict(log.schemas), channels=dict(log.channels))
+        for record in records:
+            _add(staged, record)
+        log.schemas.update(staged.schemas)
+        log.channels.update(staged.channels)
+        for topic, items in staged.messages.items():
+            log.messages.setdefault(topic, []).extend(items)
+        log.chunks += 1
+    elif opcode == Opcode.ATTACHMENT:
+        (crc,) = struct.unpack("<I", body[-4:])
+        if crc and zlib.crc32(body[:-4]) != crc:
+            raise ValueError("attachment CRC mismatch")
+        _add(log, Attachment.read(stream))
+    elif opcode == Opcode.METADATA:
+        _add(log, Metadata.read(stream))
+    elif opcode == Opcode.SCHEMA:
+        _add(log, Schema.read(stream))
+    elif opcode == Opcode.CHANNEL:
+        _add(log, Channel.read(stream))
+    elif opcode == Opcode.MESSAGE:
+        _add(log, Message.read(stream, len(body)))
+
+
+def _add(log: LogContents, record: Any) -> None:
+    if isinstance(record, Schema):
+        log.schemas[record.id] = record
+    elif isinstance(record, Channel):
+        log.channels[record.id] = record
+    elif isinstance(record, Message):
+        channel = log.channels.get(record.channel_id)
+        if channel is None:
+            raise ValueError(f"message on unknown channel {record.channel_id}")
+        log.messages.setdefault(channel.topic, []).append((record.log_time, record.data))
+    elif isinstance(record, Metadata):
+        log.metadata[record.name] = dict(record.metadata)
+    elif isinstance(record, Attachment):
+        log.attachments[record.name] = record
+
+
+# -- validation ------------------------------------------------------------------------------
+
+_SAMPLE_VALIDATOR = jsonschema.Draft202012Validator(fmt.SAMPLE_SCHEMA)
+
+
+def read_recording(path: str | os.PathLike) -> Recording:
+    """Read, validate and return a recording.
+
+    Raises
+    ------
+    LogFormatError
+        Not an MCAP file, empty, not an hframe-id recording (other schema), unknown major
+        format version, missing metadata or sample fields, non-monotonic time or sequence,
+        non-finite values, nothing recoverable.
+
+    Warns
+    -----
+    TruncatedRecordingWarning
+        The file was not finished (writer killed); says how much was recovered.
+    SequenceGapWarning
+        Samples are missing (their count and position are in ``Recording.sequence_gaps``).
+    """
+    log = read_log(path)
+    where = str(log.path)
+    channel = log.channel(fmt.SAMPLE_TOPIC)
+    if channel is None:
+        if not log.complete and not log.channels:
+            raise LogFormatError(
+                f"{where}: unfinished file with no complete chunk, nothing to recover "
+                f"({log.problem})"
+            )
+        topics = ", ".join(sorted(c.topic for c in log.channels.values())) or "none"
+        raise LogFormatError(
+            f"{where}: no {fmt.SAMPLE_TOPIC} channel, not an hframe-id recording "
+            f"(channels: {topics})"
+        )
+    schema = log.schemas.get(channel.schema_id)
+    if (
+        schema is None
+        or schema.name != fmt.SAMPLE_SCHEMA_NAME
+        or schema.encoding != "jsonschema"
+        or channel.message_encoding != "json"
+    ):
+        found = f"{schema.name!r} ({schema.encoding})" if schema else "no schema"
+        raise LogFormatError(
+            f"{where}: {fmt.SAMPLE_TOPIC} has schema {found} with {channel.message_encoding!r}"
+            f" messages; expected {fmt.SAMPLE_SCHEMA_NAME!r} (jsonschema) with 'json' messages"
+        )
+    experiment = _metadata(log, "experiment", fmt.EXPERIMENT_REQUIRED)
+    version = experiment["format_version"]
+    if fmt.major_version(version) != fmt.SUPPORTED_MAJOR:
+        raise LogFormatError(
+            f"{where}: unknown log format version {version!r}; this hframe-id reads "
+            f"{fmt.SUPPORTED_MAJOR}.x"
+        )
+    rig = _metadata(log, "rig", fmt.RIG_REQUIRED)
+    variant = rig["variant"]
+    if variant not in VARIANTS:
+        raise LogFormatError(
+            f"{where}: rig.variant {variant!r} is not a model variant ({', '.join(VARIANTS)})"
+        )
+    sample_period_s = rig["sample_period_s"]
+    if not isinstance(sample_period_s, int | float) or not sample_period_s > 0:
+        raise LogFormatError(f"{where}: rig.sample_period_s must be > 0, got {sample_period_s!r}")
+    input_names = fmt.split_list(rig["inputs"])
+    output_names = fmt.split_list(rig["outputs"])
+    bad_inputs = [n for n in input_names if n not in ("u1", "u2")]
+    bad_outputs = [n for n in output_names if n not in ENCODER_OUTPUTS + LASER_OUTPUTS]
+    if not input_names or bad_inputs or not output_names or bad_outputs:
+        raise LogFormatError(
+            f"{where}: rig.inputs {rig['inputs']!r} / rig.outputs {rig['outputs']!r} must name "
+            "u1, u2 and phi1, phi2, x, y"
+        )
+
+    messages = log.decoded(fmt.SAMPLE_TOPIC)
+    if not messages:
+        raise LogFormatError(f"{where}: no samples on {fmt.SAMPLE_TOPIC}")
+    _check_fields(where, messages)
+    sequence = _column(where, messages, "sequence", int)
+    device_time_us = _column(where, messages, "device_time_us", int)
+    _check_increasing(where, "sequence", sequence)
+    _check_increasing(where, "device_time_us", device_time_us)
+    steps = np.diff(sequence)
+    gap_at = np.flatnonzero(steps > 1)
+    gaps = tuple((int(i + 1), int(steps[i] - 1)) for i in gap_at)
+
+    inputs = np.column_stack([_column(where, messages, f"{name}_V", float) for name in input_names])
+    outputs = np.empty((len(messages), len(output_names)))
+    valid = np.ones(outputs.shape, dtype=bool)
+    for j, name in enumerate(output_names):
+        if name in ENCODER_OUTPUTS:
+            _column(where, messages, f"encoder{name[-1]}_counts", int)
+            outputs[:, j] = _column(where, messages, f"{name}_rad", float)
+        else:
+            flag = _column(where, messages, f"laser_{name}_valid", bool)
+            value = _column(where, messages, f"laser_{name}_m", float, nullable=True)
+            bad = flag & ~np.isfinite(value)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise LogFormatError(
+                    f"{where}: sample {i} (sequence {sequence[i]}): laser_{name}_m is "
+                    f"{messages[i][f'laser_{name}_m']!r} although laser_{name}_valid is true"
+                )
+            outputs[:, j] = value
+            valid[:, j] = flag
+
+    events = tuple(log.decoded(fmt.EVENT_TOPIC))
+    aborted = any(e.get("kind") == "abort" for e in events)
+    time_s = (device_time_us - device_time_us[0]) * 1e-6
+    truth = _truth(log)
+    if not log.complete:
+        recovered = f"{len(messages)} samples ({time_s[-1]:.3f} s)" if len(time_s) else "nothing"
+        warnings.warn(
+            f"{where}: file is unfinished (writer killed?): {log.problem}; recovered "
+            f"{recovered} from {log.chunks} complete chunk(s), {log.bytes_read} of "
+            f"{log.bytes_total} bytes",
+            TruncatedRecordingWarning,
+            stacklevel=2,
+        )
+    if gaps:
+        lost = sum(n for _, n in gaps)
+        warnings.warn(
+            f"{where}: {lost} sample(s) lost in {len(gaps)} gap(s) of the sequence numbers "
+            f"(first before sample {gaps[0][0]}, sequence {sequence[gaps[0][0]]})",
+            SequenceGapWarning,
+            stacklevel=2,
+        )
+    return Recording(
+        variant=variant,
+        sample_period_s=float(sample_period_s),
+        time_s=time_s,
+        inputs=inputs,
+        input_names=input_names,
+        outputs=outputs,
+        output_names=output_names,
+        valid=valid,
+        rig=rig,
+        experiment=experiment,
+        truth=truth,
+        sequence_gaps=gaps,
+        aborted=aborted,
+        path=log.path,
+        truncated=not log.complete,
+        events=events,
+    )
+
+
+def _metadata(log: LogContents, name: str, required: tuple[str, ...]) -> dict[str, Any]:
+    if name not in log.metadata:
+        raise LogFormatError(f"{log.path}: no {name!r} metadata record")
+    raw = log.metadata[name]
+    missing = [key for key in required if key not in raw]
+    if missing:
+        raise LogFormatError(f"{log.path}: {name} metadata lacks {', '.join(missing)}")
+    return fmt.decode_metadata(raw)
+
+
+def _check_fields(where: str, messages: list[dict[str, Any]]) -> None:
+    first = messages[0]
+    if not isinstance(first, dict):
+        raise LogFormatError(f"{where}: sample 0 is not a JSON object")
+    error = jsonschema.exceptions.best_match(_SAMPLE_VALIDATOR.iter_errors(first))
+    if error is not None:
+        place = ".".join(str(p) for p in error.absolute_path) or "message"
+        raise LogFormatError(
+            f"{where}: sample 0 does not match the sample schema: {place}: {error.message}"
+        )
+    required = set(fmt.SAMPLE_SCHEMA["required"])
+    for i, message in enumerate(messages):
+        if not isinstance(message, dict) or not required.issubset(message):
+            missing = sorted(required - set(message)) if isinstance(message, dict) else ["all"]
+            raise LogFormatError(f"{where}: sample {i} lacks field(s) {', '.join(missing)}")
+
+
+def _column(
+    where: str, messages: list[dict[str, Any]], name: str, kind: type, nullable: bool = False
+) -> np.ndarray:
+    values = [m[name] for m in messages]
+    if kind is bool:
+        ok = [type(v) is bool for v in values]
+    elif kind is int:
+        ok = [type(v) is int for v in values]
+    else:
+        ok = [(type(v) in (int, float)) or (nullable and v is None) for v in values]
+    if not all(ok):
+        i = ok.index(False)
+        expected = {bool: "true/false", int: "an integer", float: "a number"}[kind]
+        raise LogFormatError(f"{where}: sample {i}: {name} must be {expected}, got {values[i]!r}")
+    if kind is float:
+        array = np.array([np.nan if v is None else v for v in values], dtype=float)
+        if not nullable and not np.isfinite(array).all():
+            i = int(np.argmax(~np.isfinite(array)))
+            raise LogFormatError(f"{where}: sample {i}: {name} is not finite ({values[i]!r})")
+        return array
+    return np.array(values, dtype=bool if kind is bool else np.int64)
+
+
+def _check_increasing(where: str, name: str, values: np.ndarray) -> None:
+    steps = np.diff(values)
+    if (steps <= 0).any():
+        i = int(np.argmax(steps <= 0)) + 1
+        raise LogFormatError(
+            f"{where}: {name} must increase strictly, but sample {i} has {values[i]} after "
+            f"{values[i - 1]}"
+        )
+
+
+def _truth(log: LogContents) -> ParameterSet | None:
+    attachment = log.attachments.get(fmt.PLANT_ATTACHMENT)
+    if attachment is None:
+        return None
+    with tempfile.TemporaryDirectory() as folder:
+        file = Path(folder) / fmt.PLANT_ATTACHMENT
+        file.write_bytes(attachment.data)
+        try:
+            params = load_parameter_file(file)
+        except HframeIdError as err:
+            message = str(err).replace(str(file), f"{log.path}[{fmt.PLANT_ATTACHMENT}]")
+            raise LogFormatError(f"attached plant parameters are invalid: {message}") from None
+    params.path = Path(f"{log.path}[{fmt.PLANT_ATTACHMENT}]")
+    return params

@@ -1,0 +1,414 @@
+"""Run one experiment on a rig and log it: the safety rules, the sample loop, the summary.
+
+Safety, always on:
+- commanded voltages are clamped to the DAC range (a ``clamp`` event says so once);
+- a closed limit switch or a link fault sets 0 V at once, logs the event and aborts the run;
+- SIGINT (Ctrl-C) and SIGTERM set 0 V, log a ``signal`` event and finish the file properly.
+
+The loop only reads a sample, looks up the protocol's voltage, commands it and queues the
+message; encoding and disk writes happen on the writer's thread (``LogWriter``).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import getpass
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from hframe_id import __version__
+from hframe_id.errors import OptionError, RigFault
+from hframe_id.recordings import log_format as fmt
+from hframe_id.recordings.writer import (
+    DEFAULT_CHUNK_DURATION_S,
+    DEFAULT_FLUSH_INTERVAL_S,
+    Attachment,
+    LogWriter,
+)
+from hframe_id.rig.interface import Rig, RigSample
+
+#: Sample time between two ``/rig/status`` messages [s].
+STATUS_INTERVAL_S = 0.1
+
+
+class ExperimentProtocol(Protocol):
+    name: str
+    n_inputs: int
+
+    def table(self, period_s: float) -> np.ndarray: ...
+
+    def metadata(self) -> dict[str, Any]: ...
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to log a run.
+
+    Attributes
+    ----------
+    out : the recording to write (``.mcap``).
+    operator : who ran it (default: the login name).
+    overwrite : replace an existing recording.
+    reproducible : for unpaced sim runs: chunks by sample time only, host timing left out of
+        the status messages, so that the same seed and start time give the same bytes.
+    start_time : Unix time of sample 0 for the metadata and ``log_time`` (default: now).
+    chunk_duration_s, flush_interval_s : see ``LogWriter``.
+    progress : called about every 0.1 s of wall time with (samples done, samples planned,
+        lost samples).
+    handle_signals : turn SIGINT and SIGTERM into a clean stop (main thread only).
+    notes : free text stored in the experiment metadata.
+    """
+
+    out: Path
+    operator: str | None = None
+    overwrite: bool = False
+    reproducible: bool = False
+    start_time: dt.datetime | None = None
+    chunk_duration_s: float = DEFAULT_CHUNK_DURATION_S
+    flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S
+    progress: Callable[[int, int, int], None] | None = None
+    handle_signals: bool = True
+    notes: str = ""
+    extra_experiment: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class RunSummary:
+    """What happened in a run (printed by ``hframe-id record``)."""
+
+    path: Path
+    samples: int = 0
+    planned_samples: int = 0
+    lost_samples: int = 0
+    gaps: int = 0
+    late_commands: int = 0
+    crc_errors: int = 0
+    duration_s: float = 0.0
+    wall_s: float = 0.0
+    aborted: bool = False
+    abort_reason: str = ""
+    host_period_mean_us: float = math.nan
+    host_period_jitter_us: float = math.nan
+    host_period_max_us: float = math.nan
+    host_latency_mean_us: float = math.nan
+    host_latency_max_us: float = math.nan
+    overhead_mean_us: float = math.nan
+    events: list[tuple[str, str]] = field(default_factory=list)
+
+    def lines(self) -> list[str]:
+        def us(value: float) -> str:
+            return "n/a" if not math.isfinite(value) else f"{value:.0f} us"
+
+        out = [
+            f"recording      {self.path}",
+            f"samples        {self.samples} of {self.planned_samples} planned "
+            f"({self.duration_s:.3f} s of device time in {self.wall_s:.3f} s)",
+            f"lost samples   {self.lost_samples} in {self.gaps} gap(s); late commands "
+            f"{self.late_commands}; CRC errors {self.crc_errors}",
+            f"timing         host period mean {us(self.host_period_mean_us)}, jitter (std) "
+            f"{us(self.host_period_jitter_us)}, max {us(self.host_period_max_us)}; "
+            f"command latency mean {us(self.host_latency_mean_us)}, max "
+            f"{us(self.host_latency_max_us)}",
+            f"logger         {us(self.overhead_mean_us)} per sample",
+            "aborted        " + (f"yes: {self.abort_reason}" if self.aborted else "no"),
+        ]
+        return out
+
+
+class _Running:
+    """Running mean, standard deviation and maximum (Welford), without storing samples."""
+
+    def __init__(self) -> None:
+        self.n, self.mean, self.m2, self.max = 0, 0.0, 0.0, -math.inf
+
+    def add(self, value: float) -> None:
+        self.n += 1
+        delta = value - self.mean
+        self.mean += delta / self.n
+        self.m2 += delta * (value - self.mean)
+        self.max = max(self.max, value)
+
+    @property
+    def std(self) -> float:
+        return math.sqrt(self.m2 / (self.n - 1)) if self.n > 1 else math.nan
+
+    def values(self, scale: float = 1.0) -> tuple[float, float, float]:
+        if self.n == 0:
+            return math.nan, math.nan, math.nan
+        return self.mean * scale, self.std * scale, self.max * scale
+
+
+class _StopRequest:
+    def __init__(self) -> None:
+        self.reason: str | None = None
+        self._previous: dict[int, Any] = {}
+
+    def install(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            self._previous[signum] = signal.signal(signum, self._handle)
+
+    def _handle(self, signum: int, frame: object) -> None:
+        self.reason = f"{signal.Signals(signum).name} received"
+
+    def restore(self) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
+
+
+def experiment_metadata(
+    protocol: ExperimentProtocol, options: RunOptions, start: dt.datetime
+) -> dict[str, Any]:
+    """The ``experiment`` metadata record (see docs/log-format.md)."""
+    operator = options.operator
+    if operator is None:
+        try:
+            operator = getpass.getuser()
+        except (KeyError, OSError):
+            operator = "unknown"
+    return {
+        "format_version": fmt.FORMAT_VERSION,
+        "software_version": f"hframe-id {__version__}",
+        "operator": operator,
+        "start_time": start.isoformat(timespec="microseconds"),
+        "notes": options.notes,
+        **protocol.metadata(),
+        **options.extra_experiment,
+    }
+
+
+def run_experiment(
+    rig: Rig,
+    protocol: ExperimentProtocol,
+    options: RunOptions,
+    attachments: Sequence[Attachment] = (),
+) -> RunSummary:
+    """Run ``protocol`` on ``rig`` (started here, stopped at the end) and write the recording.
+
+    The rig is left stopped with 0 V whatever happens; the recording is finished (renamed to
+    its final name) whatever happens, with an ``abort`` event if the run did not complete.
+    """
+    info = rig.info
+    if protocol.n_inputs != len(info.inputs):
+        raise OptionError(
+            f"protocol {protocol.name} drives {protocol.n_inputs} motor(s); the "
+            f"{info.variant} rig has {len(info.inputs)} ({', '.join(info.inputs)})"
+        )
+    period_us = info.period_us
+    table = protocol.table(info.sample_period_s)
+    n_planned = table.shape[0]
+    sensors = info.sensors
+    clamped_table = np.clip(table, sensors.dac_min_v, sensors.dac_max_v)
+    start = options.start_time or dt.datetime.now(dt.UTC)
+    if start.tzinfo is None:
+        raise OptionError("start_time must carry a time zone")
+    start_ns = int(start.timestamp()) * 10**9 + start.microsecond * 1000
+    writer = LogWriter(
+        options.out,
+        info.metadata(),
+        experiment_metadata(protocol, options, start),
+        [*rig.attachments(), *attachments],
+        start_time_ns=start_ns,
+        chunk_duration_s=options.chunk_duration_s,
+        flush_interval_s=None if options.reproducible else options.flush_interval_s,
+        overwrite=options.overwrite,
+    )
+    summary = RunSummary(path=writer.path, planned_samples=n_planned)
+    stop = _StopRequest()
+    if options.handle_signals:
+        stop.install()
+    zero = np.zeros(len(info.inputs))
+    periods, latencies, overhead = _Running(), _Running(), _Running()
+    first_time: int | None = None
+    last_sequence: int | None = None
+    last_commanded: int | None = None
+    last_received: float | None = None
+    next_status_us = 0
+    time_us = 0
+    clamp_reported = False
+    wall_start = time.perf_counter()
+    next_progress = wall_start
+    encoder_step = sensors.encoder_step_rad
+
+    def event(kind: str, reason: str, sample: RigSample | None = None) -> None:
+        summary.events.append((kind, reason))
+        writer.event(
+            time_us,
+            kind,
+            reason,
+            sample.sequence if sample else None,
+            sample.device_time_us if sample else None,
+        )
+
+    def status(sample: RigSample | None) -> None:
+        mean_p, std_p, max_p = periods.values(1e6)
+        mean_l, _, max_l = latencies.values(1e6)
+        timing = not options.reproducible
+        writer.status(
+            time_us,
+            {
+                "sequence": sample.sequence if sample else (last_sequence or 0),
+                "samples": summary.samples,
+                "lost_samples": summary.lost_samples,
+                "crc_errors": rig.stats.crc_errors,
+                "late_commands": summary.late_commands,
+                "watchdog": bool(sample.watchdog) if sample else False,
+                "host_latency_mean_us": mean_l if timing else None,
+                "host_latency_max_us": max_l if timing else None,
+                "host_period_jitter_us": std_p if timing else None,
+                "host_period_max_us": max_p if timing else None,
+                "queue_depth": writer.queue_depth() if timing else None,
+            },
+        )
+
+    sample: RigSample | None = None
+    try:
+        rig.start()
+        event("start", f"{protocol.name} protocol, {n_planned} samples planned")
+        while True:
+            try:
+                sample = rig.read()
+            except RigFault as fault:
+                _safe_zero(rig, last_sequence, zero)
+                summary.aborted, summary.abort_reason = True, f"link fault: {fault}"
+                event("link_fault", str(fault))
+                event("abort", summary.abort_reason)
+                break
+            busy_from = time.perf_counter()
+            if first_time is None:
+                first_time = sample.device_time_us
+            time_us = sample.device_time_us - first_time
+            k = round(time_us / period_us)
+            if last_sequence is not None:
+                missing = sample.sequence - last_sequence - 1
+                if missing > 0:
+                    summary.lost_samples += missing
+                    summary.gaps += 1
+            if last_commanded is not None and sample.command_sequence != last_commanded:
+                summary.late_commands += 1
+            reason, kind = None, ""
+            if stop.reason is not None:
+                reason, kind = stop.reason, "signal"
+            closed = [name for name, on in sample.limits.items() if on]
+            if closed:
+                reason, kind = f"limit switch {', '.join(closed)} closed", "limit"
+            if k >= n_planned:  # device time ran past the plan (lost samples at the end)
+                volts = zero
+            elif reason is not None:
+                volts = zero
+            else:
+                volts = clamped_table[k]
+                if not clamp_reported and (volts != table[k]).any():
+                    clamp_reported = True
+                    event(
+                        "clamp",
+                        f"requested {table[k].tolist()} V clamped to the DAC range "
+                        f"[{sensors.dac_min_v}, {sensors.dac_max_v}] V",
+                        sample,
+                    )
+            rig.set_voltages(sample.sequence, volts)
+            commanded_at = time.perf_counter()
+            latencies.add(commanded_at - sample.received_s)
+            if last_received is not None:
+                periods.add(sample.received_s - last_received)
+            last_received = sample.received_s
+            last_sequence, last_commanded = sample.sequence, sample.sequence
+            writer.sample(time_us, _message(info, sample, volts, encoder_step))
+            summary.samples += 1
+            if reason is not None:
+                summary.aborted, summary.abort_reason = True, reason
+                event(kind, reason, sample)
+                event("abort", reason, sample)
+                break
+            if time_us >= next_status_us:
+                status(sample)
+                next_status_us += round(STATUS_INTERVAL_S * 1e6)
+            overhead.add(time.perf_counter() - busy_from)
+            if options.progress is not None and commanded_at >= next_progress:
+                options.progress(k + 1, n_planned, summary.lost_samples)
+                next_progress = commanded_at + 0.1
+            if k >= n_planned - 1:
+                break
+    except BaseException as err:
+        _safe_zero(rig, last_sequence, zero)
+        summary.aborted = True
+        summary.abort_reason = f"{type(err).__name__}: {err}"
+        event("abort", summary.abort_reason, sample)
+        raise
+    finally:
+        try:
+            rig.stop()
+        except RigFault as fault:
+            event("note", f"stopping the rig failed: {fault}")
+        stop.restore()
+        if not summary.aborted:
+            event("stop", f"completed {summary.samples} samples", sample)
+        status(sample)
+        summary.wall_s = time.perf_counter() - wall_start
+        summary.duration_s = time_us * 1e-6
+        summary.crc_errors = rig.stats.crc_errors
+        (summary.host_period_mean_us, summary.host_period_jitter_us, summary.host_period_max_us) = (
+            periods.values(1e6)
+        )
+        summary.host_latency_mean_us, _, summary.host_latency_max_us = latencies.values(1e6)
+        summary.overhead_mean_us = overhead.values(1e6)[0]
+        writer.finish()
+        if options.progress is not None:
+            options.progress(summary.samples, n_planned, summary.lost_samples)
+    return summary
+
+
+def _safe_zero(rig: Rig, sequence: int | None, zero: np.ndarray) -> None:
+    try:
+        rig.set_voltages(sequence if sequence is not None else 0, zero)
+    except Exception:  # the link is gone; the device watchdog drops the outputs itself
+        pass
+
+
+def _message(
+    info: Any, sample: RigSample, volts: np.ndarray, encoder_step: float
+) -> dict[str, Any]:
+    """The flat ``/rig/sample`` message (docs/log-format.md)."""
+    message: dict[str, Any] = {
+        "sequence": sample.sequence,
+        "device_time_us": sample.device_time_us,
+    }
+    n_in = len(info.inputs)
+    for m in (1, 2):
+        message[f"u{m}_V"] = float(volts[m - 1]) if m <= n_in else None
+    for m in (1, 2):
+        message[f"applied{m}_V"] = sample.applied_v[m - 1] if m <= n_in else None
+    encoders = info.encoders
+    for m in (1, 2):
+        name = f"phi{m}"
+        if name in encoders:
+            counts = sample.encoder_counts[encoders.index(name)]
+            message[f"encoder{m}_counts"] = counts
+            message[f"phi{m}_rad"] = counts * encoder_step
+        else:
+            message[f"encoder{m}_counts"] = None
+            message[f"phi{m}_rad"] = None
+    lasers = info.lasers
+    for axis in ("x", "y"):
+        if axis in lasers:
+            j = lasers.index(axis)
+            message[f"laser_{axis}_m"] = sample.laser_m[j]  # NaN -> null in the writer
+            message[f"laser_{axis}_valid"] = sample.laser_valid[j]
+        else:
+            message[f"laser_{axis}_m"] = None
+            message[f"laser_{axis}_valid"] = None
+    for name in fmt.LIMIT_SWITCHES:
+        message[f"limit_{name}"] = sample.limits.get(name)
+    message["command_sequence"] = sample.command_sequence
+    message["watchdog"] = sample.watchdog
+    return message

@@ -1,0 +1,250 @@
+"""Experiment protocols: which voltage to command at each sample.
+
+A protocol turns into a table of voltages, one row per sample index k (time k T), so that
+edges fall on whole samples whatever the float rounding of k T. Three kinds:
+
+- ``StepProtocol``: a voltage step per motor (the H-frame experiments of section 4.4): 0 V for
+  ``pre_roll_s``, then ``voltages_v`` for ``step_s``, then 0 V until ``duration_s``.
+- ``PulseProtocol``: one motor, one amplitude for ``width_s`` (the one-axis tests, section 2.3:
+  0.25 s pulses of 5 V and 10 V).
+- ``SequenceProtocol``: an arbitrary sequence read from CSV (``time [s]``, ``u1 [V]``[, ``u2
+  [V]``]), held from each row's time to the next one's.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hframe_id.errors import OptionError
+
+
+def _samples(name: str, seconds: float, period_s: float, minimum: int = 0) -> int:
+    if not math.isfinite(seconds) or seconds < 0:
+        raise OptionError(f"{name} must be a finite time >= 0 s, got {seconds}")
+    n = round(seconds / period_s)
+    if abs(n * period_s - seconds) > 1e-9 + 1e-6 * seconds:
+        raise OptionError(
+            f"{name} {seconds} s is not a whole number of {period_s * 1e3:g} ms samples"
+        )
+    if n < minimum:
+        raise OptionError(f"{name} must be at least {minimum} sample(s), got {seconds} s")
+    return n
+
+
+def _check_volts(name: str, value: float) -> float:
+    if not isinstance(value, int | float) or not math.isfinite(value):
+        raise OptionError(f"{name} must be a finite voltage, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class StepProtocol:
+    """A voltage step on every motor at once.
+
+    Attributes
+    ----------
+    voltages_v : step voltage per motor [V] (one entry per rig input).
+    step_s : how long the step lasts [s].
+    duration_s : record duration [s] (samples at 0, T, ..., duration - T).
+    pre_roll_s : 0 V recorded before the step [s].
+    """
+
+    voltages_v: tuple[float, ...]
+    step_s: float
+    duration_s: float
+    pre_roll_s: float = 0.05
+    name: str = field(default="step", init=False)
+
+    def __post_init__(self) -> None:
+        if not self.voltages_v:
+            raise OptionError("a step needs at least one motor voltage")
+        for i, v in enumerate(self.voltages_v, start=1):
+            _check_volts(f"step voltage of motor {i}", v)
+        for label, value in (
+            ("step", self.step_s),
+            ("duration", self.duration_s),
+            ("pre-roll", self.pre_roll_s),
+        ):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise OptionError(f"{label} must be a finite time >= 0 s, got {value!r}")
+        if self.pre_roll_s + self.step_s > self.duration_s + 1e-12:
+            raise OptionError(
+                f"pre-roll {self.pre_roll_s} s + step {self.step_s} s must fit in the record "
+                f"duration {self.duration_s} s"
+            )
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.voltages_v)
+
+    def table(self, period_s: float) -> np.ndarray:
+        """(N, n_u) voltages [V], row k commanded after sample k."""
+        n = _samples("duration", self.duration_s, period_s, minimum=1)
+        start = _samples("pre-roll", self.pre_roll_s, period_s)
+        width = _samples("step", self.step_s, period_s)
+        table = np.zeros((n, self.n_inputs))
+        table[start : start + width] = self.voltages_v
+        return table
+
+    def metadata(self) -> dict[str, Any]:
+        meta: dict[str, Any] = {"protocol": self.name}
+        for i, v in enumerate(self.voltages_v, start=1):
+            meta[f"protocol.v{i}_V"] = v
+        meta.update(
+            {
+                "protocol.step_s": self.step_s,
+                "protocol.duration_s": self.duration_s,
+                "protocol.pre_roll_s": self.pre_roll_s,
+            }
+        )
+        return meta
+
+
+@dataclass(frozen=True)
+class PulseProtocol:
+    """A voltage pulse on one motor (the others at 0 V).
+
+    Attributes
+    ----------
+    amplitude_v : pulse voltage [V].
+    width_s : pulse length [s] (0.25 s in section 2.3).
+    duration_s : record duration [s].
+    pre_roll_s : 0 V recorded before the pulse [s].
+    motor : which motor (1-based).
+    n_inputs : motors of the rig.
+    """
+
+    amplitude_v: float
+    width_s: float
+    duration_s: float
+    pre_roll_s: float = 0.05
+    motor: int = 1
+    n_inputs: int = 1
+    name: str = field(default="pulse", init=False)
+
+    def __post_init__(self) -> None:
+        _check_volts("pulse amplitude", self.amplitude_v)
+        if not 1 <= self.motor <= self.n_inputs:
+            raise OptionError(
+                f"pulse motor must be in 1..{self.n_inputs} on this rig, got {self.motor}"
+            )
+        StepProtocol((self.amplitude_v,), self.width_s, self.duration_s, self.pre_roll_s)
+
+    def table(self, period_s: float) -> np.ndarray:
+        single = StepProtocol(
+            (self.amplitude_v,), self.width_s, self.duration_s, self.pre_roll_s
+        ).table(period_s)
+        table = np.zeros((single.shape[0], self.n_inputs))
+        table[:, self.motor - 1] = single[:, 0]
+        return table
+
+    def metadata(self) -> dict[str, Any]:
+        return {
+            "protocol": self.name,
+            "protocol.amplitude_V": self.amplitude_v,
+            "protocol.width_s": self.width_s,
+            "protocol.duration_s": self.duration_s,
+            "protocol.pre_roll_s": self.pre_roll_s,
+            "protocol.motor": self.motor,
+        }
+
+
+@dataclass(frozen=True)
+class SequenceProtocol:
+    """An arbitrary voltage sequence: ``voltages_v[i]`` from ``time_s[i]`` to ``time_s[i+1]``.
+
+    The record lasts ``duration_s`` (default: the last row's time plus one sample).
+    """
+
+    time_s: tuple[float, ...]
+    voltages_v: tuple[tuple[float, ...], ...]
+    duration_s: float | None = None
+    source: str = ""
+    sha256: str = ""
+    name: str = field(default="sequence", init=False)
+
+    def __post_init__(self) -> None:
+        if not self.time_s or len(self.time_s) != len(self.voltages_v):
+            raise OptionError("a voltage sequence needs one row of voltages per time, >= 1 row")
+        times = np.asarray(self.time_s, dtype=float)
+        if not np.isfinite(times).all() or times[0] < 0 or (np.diff(times) <= 0).any():
+            raise OptionError("sequence times must be finite, >= 0 and strictly increasing")
+        widths = {len(row) for row in self.voltages_v}
+        if len(widths) != 1:
+            raise OptionError("every sequence row needs the same number of voltages")
+        if not np.isfinite(np.asarray(self.voltages_v, dtype=float)).all():
+            raise OptionError("sequence voltages must be finite")
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.voltages_v[0])
+
+    def table(self, period_s: float) -> np.ndarray:
+        duration = self.duration_s
+        if duration is None:
+            duration = self.time_s[-1] + period_s
+        n = _samples("duration", round(duration / period_s) * period_s, period_s, minimum=1)
+        t = np.arange(n) * period_s
+        rows = np.searchsorted(np.asarray(self.time_s), t + 1e-9 * period_s, side="right") - 1
+        values = np.asarray(self.voltages_v, dtype=float)
+        table = np.zeros((n, self.n_inputs))
+        inside = rows >= 0
+        table[inside] = values[rows[inside]]
+        return table
+
+    def metadata(self) -> dict[str, Any]:
+        return {
+            "protocol": self.name,
+            "protocol.source": self.source,
+            "protocol.sha256": self.sha256,
+            "protocol.rows": len(self.time_s),
+            "protocol.duration_s": self.duration_s if self.duration_s is not None else "",
+        }
+
+
+def load_sequence_csv(path: str | os.PathLike, duration_s: float | None = None) -> SequenceProtocol:
+    """Read a voltage sequence: header ``time [s],u1 [V][,u2 [V]]``, then one row per change."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise OptionError(f"{path}: cannot read the voltage sequence ({err.strerror})") from None
+    rows = list(csv.reader(raw.decode(errors="replace").splitlines()))
+    rows = [r for r in rows if r and not r[0].lstrip().startswith("#")]
+    if not rows:
+        raise OptionError(f"{path}: empty voltage sequence")
+    header = [h.strip() for h in rows[0]]
+    expected = ["time [s]", "u1 [V]", "u2 [V]"][: len(header)]
+    if len(header) < 2 or header != expected:
+        raise OptionError(
+            f"{path}: header must be 'time [s],u1 [V]' or 'time [s],u1 [V],u2 [V]', got "
+            f"{','.join(header)!r}"
+        )
+    times, volts = [], []
+    for line, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise OptionError(f"{path}: row {line} has {len(row)} values, expected {len(header)}")
+        try:
+            numbers = [float(v) for v in row]
+        except ValueError:
+            raise OptionError(f"{path}: row {line} is not all numbers: {row}") from None
+        times.append(numbers[0])
+        volts.append(tuple(numbers[1:]))
+    try:
+        return SequenceProtocol(
+            tuple(times),
+            tuple(volts),
+            duration_s,
+            source=path.name,
+            sha256=hashlib.sha256(raw).hexdigest(),
+        )
+    except OptionError as err:
+        raise OptionError(f"{path}: {err}") from None
