@@ -16,6 +16,7 @@ checked in the tests.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import casadi as ca
 import numpy as np
@@ -32,31 +33,61 @@ def rk4_step(model: Model, n_substeps: int, dt: float) -> ca.Function:
     Built from SX so the whole step is one flat expression graph (fast to evaluate, map and
     differentiate).
     """
+    return rk4_function(model.dynamics, n_substeps, dt)
+
+
+def rk4_function(dynamics: ca.Function, n_substeps: int, dt: float) -> ca.Function:
+    """``n_substeps`` classical RK4 steps of any (x, u, p, s) -> xdot over one held sample."""
     if n_substeps < 1:
         raise ValueError(f"n_substeps must be >= 1, got {n_substeps}")
     if not dt > 0:
         raise ValueError(f"dt must be > 0 s, got {dt}")
+    x = ca.SX.sym("x", dynamics.size1_in(0))
+    u = ca.SX.sym("u", dynamics.size1_in(1))
+    p = ca.SX.sym("p", dynamics.size1_in(2))
+    s = ca.SX.sym("s", dynamics.size1_in(3))
+    return ca.Function(
+        "rk4_step", [x, u, p, s], [rk4_expression(dynamics, x, u, p, s, n_substeps, dt)],
+        ["x", "u", "p", "s"], ["x_next"],
+    )  # fmt: skip
+
+
+def rk4_expression(
+    dynamics: ca.Function,
+    x: ca.SX,
+    u: ca.SX,
+    p: ca.SX,
+    s: ca.SX,
+    n_substeps: int,
+    dt: float,
+) -> ca.SX:
+    """State after ``dt`` [s] from ``x`` under held ``u``: ``n_substeps`` RK4 steps, as SX."""
+    h = dt / n_substeps
+    xk = x
+    for _ in range(n_substeps):
+        k1 = dynamics(xk, u, p, s)
+        k2 = dynamics(xk + h / 2 * k1, u, p, s)
+        k3 = dynamics(xk + h / 2 * k2, u, p, s)
+        k4 = dynamics(xk + h * k3, u, p, s)
+        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return xk
+
+
+@lru_cache(maxsize=32)
+def _jacobian_at_rest(model: Model) -> ca.Function:
+    """A(p, s) = df/dx at x = 0, u = 0 (built once per model)."""
     x = ca.SX.sym("x", model.n_states)
     u = ca.SX.sym("u", model.n_inputs)
     p = ca.SX.sym("p", len(model.parameters))
     s = ca.SX.sym("s", 2)
-    h = dt / n_substeps
-    xk = x
-    for _ in range(n_substeps):
-        k1 = model.dynamics(xk, u, p, s)
-        k2 = model.dynamics(xk + h / 2 * k1, u, p, s)
-        k3 = model.dynamics(xk + h / 2 * k2, u, p, s)
-        k4 = model.dynamics(xk + h * k3, u, p, s)
-        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("rk4_step", [x, u, p, s], [xk], ["x", "u", "p", "s"], ["x_next"])
+    jacobian = ca.Function("jacobian", [x, u, p, s], [ca.jacobian(model.dynamics(x, u, p, s), x)])
+    at_rest = jacobian(ca.DM.zeros(model.n_states), ca.DM.zeros(model.n_inputs), p, s)
+    return ca.Function("jacobian_at_rest", [p, s], [at_rest])
 
 
 def spectral_radius_at_rest(model: Model, p: np.ndarray, s: tuple[float, float]) -> float:
     """Largest |eigenvalue| [1/s] of df/dx at rest, smoothed Coulomb included."""
-    x = ca.SX.sym("x", model.n_states)
-    u = ca.SX.sym("u", model.n_inputs)
-    jac = ca.Function("jac_x", [x, u], [ca.jacobian(model.dynamics(x, u, p, ca.DM(s)), x)])
-    a = np.array(jac(np.zeros(model.n_states), np.zeros(model.n_inputs)))
+    a = np.array(_jacobian_at_rest(model)(np.asarray(p, dtype=float), ca.DM(s)))
     return float(np.max(np.abs(np.linalg.eigvals(a))))
 
 

@@ -1,0 +1,170 @@
+"""Friction laws for simulation: the smoothed Coulomb model, and the thesis's stick-slip logic.
+
+Two ways to compute the friction force F_f on each friction-bearing coordinate (docs/friction.md
+compares them):
+
+``smooth`` (the model's own law, used by identification as well)
+    F_f = b v + F_c tanh(v / v_s), v_s a small smoothing velocity (model option). Smooth, so it
+    can be differentiated and integrated by RK4, but stiff near v = 0 (slope F_c / v_s).
+
+``stick-slip`` (Table 2.2, simulation only)
+    The Embedded Matlab function of the thesis, per coordinate, with the active force F_a (all
+    generalized forces on the coordinate except friction: springs, motor torque with back-EMF):
+
+        F_tmp = b v + sign(v) F_c
+        if |v| <= band and |F_a| <= F_c:  F_f = F_a      (friction cancels the active force)
+        else:                              F_f = F_tmp
+
+    Friction is passive: inside the velocity band it can hold the coordinate but not reverse its
+    motion. Not differentiable (if_else), but not stiff either.
+
+Both are CasADi functions (x, u, p, s) -> xdot with the same signature as ``Model.dynamics``;
+for ``stick-slip`` the last input is the velocity band (linear [m/s], angular [rad/s]) instead of
+the smoothing velocities.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from hframe_id.errors import OptionError
+from hframe_id.models import Model, hframe8, hframe20, one_axis
+from hframe_id.simulation.integrators import stable_substeps
+
+FRICTION_MODELS = ("smooth", "stick-slip")
+
+#: Table 2.2's band: the motor pulley counts as stuck for |phidot| <= 0.01 rad/s.
+STICK_BAND_ANGULAR_RAD_PER_S = 0.01
+#: The thesis prints the code for the motor pulley only ("similar code" on the linear axes). The
+#: same belt speed on a linear axis is 0.01 rad/s x r = 1.94e-4 m/s at r = 19.4 mm; this default
+#: is an assumption, not a thesis value.
+STICK_BAND_LINEAR_M_PER_S = 0.01 * 0.0194
+
+_VARIANT_MODULES = {m.NAME: m for m in (one_axis, hframe20, hframe8)}
+
+
+@dataclass(frozen=True)
+class FrictionOptions:
+    """Which friction law the simulator uses.
+
+    Attributes
+    ----------
+    model : ``"smooth"`` (tanh, the model's own) or ``"stick-slip"`` (Table 2.2).
+    band_linear_m_per_s, band_angular_rad_per_s : stick-slip velocity band (ignored by smooth).
+    """
+
+    model: str = "smooth"
+    band_linear_m_per_s: float = STICK_BAND_LINEAR_M_PER_S
+    band_angular_rad_per_s: float = STICK_BAND_ANGULAR_RAD_PER_S
+
+    def __post_init__(self) -> None:
+        if self.model not in FRICTION_MODELS:
+            raise OptionError(
+                f"unknown friction model {self.model!r}; valid: {', '.join(FRICTION_MODELS)}"
+            )
+        for name in ("band_linear_m_per_s", "band_angular_rad_per_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise OptionError(f"stick-slip {name} must be > 0, got {value!r}")
+
+    @property
+    def band(self) -> tuple[float, float]:
+        return (self.band_linear_m_per_s, self.band_angular_rad_per_s)
+
+    def shape(self, model: Model) -> tuple[float, float]:
+        """The ``s`` input of the dynamics: smoothing velocities or the stick-slip band."""
+        return model.options.smoothing if self.model == "smooth" else self.band
+
+
+@dataclass(frozen=True)
+class FrictionSite:
+    """One friction-bearing coordinate: its index in q and its parameters' indices in p."""
+
+    coordinate: int
+    viscous: int
+    coulomb: int
+    linear: bool
+
+
+@lru_cache(maxsize=32)
+def friction_sites(model: Model) -> tuple[FrictionSite, ...]:
+    """Where friction acts in ``model`` (from the variant's Lagrangian description)."""
+    module = _VARIANT_MODULES[model.variant]
+    symbols = {name: ca.SX.sym(name) for name in model.parameter_names}
+    system = module.lagrangian(symbols, ca.SX.sym("u", model.n_inputs), model.options)
+    names = [c.name for c in system.coordinates]
+    parameters = list(model.parameter_names)
+    return tuple(
+        FrictionSite(
+            names.index(f.coordinate),
+            parameters.index(f.viscous),
+            parameters.index(f.coulomb),
+            system.coordinates[names.index(f.coordinate)].unit == "m",
+        )
+        for f in system.frictions
+    )
+
+
+@lru_cache(maxsize=32)
+def stick_slip_dynamics(model: Model) -> ca.Function:
+    """xdot = f(x, u, p, band) with Table 2.2's friction on every friction-bearing coordinate."""
+    x = ca.SX.sym("x", model.n_states)
+    u = ca.SX.sym("u", model.n_inputs)
+    p = ca.SX.sym("p", len(model.parameters))
+    band = ca.SX.sym("band", 2)
+    sites = friction_sites(model)
+    n_q = model.n_states // 2
+    mask = np.ones(len(model.parameters))
+    for site in sites:
+        mask[[site.viscous, site.coulomb]] = 0.0
+    free = model.dynamics(x, u, p * ca.DM(mask), ca.DM([1.0, 1.0]))  # no friction at all
+    mass = model.mass(p)
+    active = ca.mtimes(mass, free[n_q:])  # generalized forces without friction [N or N m]
+    friction = [ca.SX(0)] * n_q
+    for site in sites:
+        j = site.coordinate
+        rate, viscous, coulomb = x[n_q + j], p[site.viscous], p[site.coulomb]
+        width = band[0] if site.linear else band[1]
+        slipping = viscous * rate + ca.sign(rate) * coulomb
+        stuck = ca.logic_and(ca.fabs(rate) <= width, ca.fabs(active[j]) <= coulomb)
+        friction[j] = ca.if_else(stuck, active[j], slipping)
+    qddot = free[n_q:] - ca.solve(mass, ca.vertcat(*friction))
+    return ca.Function(
+        "stick_slip_dynamics",
+        [x, u, p, band],
+        [ca.vertcat(x[n_q:], qddot)],
+        ["x", "u", "p", "s"],
+        ["xdot"],
+    )
+
+
+def dynamics_function(model: Model, friction: FrictionOptions) -> ca.Function:
+    """(x, u, p, s) -> xdot for the chosen friction law."""
+    return model.dynamics if friction.model == "smooth" else stick_slip_dynamics(model)
+
+
+def stick_slip_substeps(
+    model: Model, p: np.ndarray, dt: float, band: tuple[float, float], minimum: int = 4
+) -> int:
+    """RK4 substeps per sample for stick-slip friction.
+
+    Two conditions: (1) the friction-free dynamics are stable (``stable_substeps`` with Coulomb
+    zero: belt modes and viscous damping only), and (2) Coulomb deceleration alone changes a
+    coasting coordinate's velocity by at most one band half-width per substep, F_c / m h <= band,
+    so that a stopping coordinate lands in the band instead of jumping across it and chattering.
+    """
+    p = np.asarray(p, dtype=float)
+    frictionless = p.copy()
+    mass = np.diag(np.asarray(model.mass(p)))
+    needed = minimum
+    for site in friction_sites(model):
+        frictionless[site.coulomb] = 0.0
+        rate = p[site.coulomb] / mass[site.coordinate]
+        width = band[0] if site.linear else band[1]
+        needed = max(needed, math.ceil(dt * rate / width))
+    return max(needed, stable_substeps(model, frictionless, dt, minimum=minimum))
