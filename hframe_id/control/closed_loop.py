@@ -47,22 +47,29 @@ def check_hframe(model: Model) -> None:
 
 @lru_cache(maxsize=16)
 def closed_loop_step(
-    model: Model, n_substeps: int, dt: float, friction_model: str = "smooth"
+    model: Model,
+    n_substeps: int,
+    dt: float,
+    friction_model: str = "smooth",
+    delay_samples: int = 0,
 ) -> ca.Function:
     """F(z, r, p, s, gains, limits) -> (z_next, u): one sample of both loops and the plant.
 
-    z = [x; e_prev1; e_prev2; I1; I2], r = (phi1, phi2) reference [rad], gains = (K_P1, K_I1,
-    K_D1, K_P2, K_I2, K_D2), limits = (u_min, u_max) [V]; u is the voltage held over the sample.
+    z = [x; e_prev1; e_prev2; I1; I2; u_{k-d} .. u_{k-1}], r = (phi1, phi2) reference [rad],
+    gains = (K_P1, K_I1, K_D1, K_P2, K_I2, K_D2), limits = (u_min, u_max) [V]; u is the voltage
+    the controller commands at t_k. With ``delay_samples`` d > 0 the plant gets u_{k-d} over
+    [t_k, t_{k+1}) (a computation / transport delay; d = 0 in Fig. 5.8).
     """
     check_hframe(model)
     n_x = model.n_states
-    z = ca.SX.sym("z", n_x + 4)
+    z = ca.SX.sym("z", n_x + 4 + 2 * delay_samples)
     r = ca.SX.sym("r", 2)
     p = ca.SX.sym("p", len(model.parameters))
     s = ca.SX.sym("s", 2)
     gains = ca.SX.sym("gains", 6)
     limits = ca.SX.sym("limits", 2)
-    x, previous, integral = z[:n_x], z[n_x : n_x + 2], z[n_x + 2 :]
+    x, previous, integral = z[:n_x], z[n_x : n_x + 2], z[n_x + 2 : n_x + 4]
+    queue = z[n_x + 4 :]
     angles = ca.vertcat(*(x[model.index("state", name)] for name in ("phi1", "phi2")))
     error = r - angles
     outputs, integrals = [], []
@@ -75,12 +82,13 @@ def closed_loop_step(
         outputs.append(u_m)
         integrals.append(i_m)
     u = ca.vertcat(*outputs)
+    applied, queue_next = (queue[:2], ca.vertcat(queue[2:], u)) if delay_samples else (u, queue)
     dynamics = dynamics_function(model, FrictionOptions(friction_model))
-    x_next = rk4_expression(dynamics, x, u, p, s, n_substeps, dt)
+    x_next = rk4_expression(dynamics, x, applied, p, s, n_substeps, dt)
     return ca.Function(
         "closed_loop_step",
         [z, r, p, s, gains, limits],
-        [ca.vertcat(x_next, error, *integrals), u],
+        [ca.vertcat(x_next, error, *integrals, queue_next), u],
         ["z", "r", "p", "s", "gains", "limits"],
         ["z_next", "u"],
     )
@@ -94,9 +102,10 @@ def closed_loop_horizon(
     n_samples: int,
     friction_model: str = "smooth",
     compiled: bool = False,
+    delay_samples: int = 0,
 ) -> ca.Function:
     """H(z0, R, p, s, gains, limits) -> (Z, U) over ``n_samples`` samples (one call)."""
-    step = closed_loop_step(model, n_substeps, dt, friction_model)
+    step = closed_loop_step(model, n_substeps, dt, friction_model, delay_samples)
     horizon = step.mapaccum("closed_loop", n_samples)
     if not compiled:
         return horizon
@@ -105,7 +114,7 @@ def closed_loop_horizon(
         for i, name in enumerate(step.name_in())
     ]
     flat = ca.Function(
-        f"closed_loop_{model.variant.replace('-', '_')}_{n_samples}",
+        f"closed_loop_{model.variant.replace('-', '_')}_{n_samples}_d{delay_samples}",
         symbols,
         horizon.call(symbols),
         step.name_in(),
@@ -237,9 +246,15 @@ def simulate_closed_loop(
     reference_xy = trajectory.position(time_s)
     reference_phi = motor_angles(reference_xy, r_m)
     x0 = rest_state(model, p, trajectory.start_m)
-    z0 = np.concatenate([x0, np.zeros(4)])
+    z0 = np.concatenate([x0, np.zeros(4 + 2 * controller.delay_samples)])
     horizon = closed_loop_horizon(
-        model, int(n), float(dt), n_samples, friction.model, bool(compiled)
+        model,
+        int(n),
+        float(dt),
+        n_samples,
+        friction.model,
+        bool(compiled),
+        controller.delay_samples,
     )
     z, u = horizon(
         z0,
@@ -260,7 +275,7 @@ def simulate_closed_loop(
         xy_m=states[:, [index["x"], index["y"]]],
         phi_rad=states[:, [index["phi1"], index["phi2"]]],
         voltages_v=np.array(u).T,
-        integral_v=z[:, model.n_states + 2 :],
+        integral_v=z[:, model.n_states + 2 : model.n_states + 4],
         trajectory=trajectory,
         controller=controller,
         friction=friction,

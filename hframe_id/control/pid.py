@@ -24,7 +24,7 @@ the trial integral has the other sign it is accepted and pulls the output off th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 
 import casadi as ca
 
@@ -77,6 +77,8 @@ class ControllerOptions:
     sample_period_s : T [s]; the zero-order holds of Fig. 5.8 sample the angles and hold the
         voltages for one period.
     u_min_v, u_max_v : output limits [V] (the D/A converter range).
+    delay_samples : samples between computing a voltage and applying it (0 in Fig. 5.8, where
+        the output hold applies u_k from t_k; a rig with a slow link may apply it later).
     """
 
     motor1: PIDGains
@@ -84,7 +86,7 @@ class ControllerOptions:
     sample_period_s: float = SAMPLE_PERIOD_S
     u_min_v: float = U_MIN_V
     u_max_v: float = U_MAX_V
-    label: str = field(default="", compare=False)
+    delay_samples: int = 0
 
     def __post_init__(self) -> None:
         for name, value in (("motor1", self.motor1), ("motor2", self.motor2)):
@@ -95,6 +97,9 @@ class ControllerOptions:
             raise OptionError(f"sample period must be > 0 s, got {t!r}")
         if not (math.isfinite(self.u_min_v) and math.isfinite(self.u_max_v)):
             raise OptionError("output limits must be finite")
+        d = self.delay_samples
+        if isinstance(d, bool) or not isinstance(d, int) or not 0 <= d <= 100:
+            raise OptionError(f"delay_samples must be an integer in 0..100, got {d!r}")
         if not self.u_min_v < 0 < self.u_max_v:
             raise OptionError(
                 f"output limits must satisfy u_min < 0 < u_max, got {self.u_min_v}, {self.u_max_v}"
@@ -119,6 +124,9 @@ class ControllerOptions:
             self.motor1.kp, self.motor1.ki, self.motor1.kd,
             self.motor2.kp, self.motor2.ki, self.motor2.kd,
         ]  # fmt: skip
+
+    def with_delay(self, delay_samples: int) -> ControllerOptions:
+        return replace(self, delay_samples=delay_samples)
 
     def describe(self) -> str:
         if self.motor1 == self.motor2:
