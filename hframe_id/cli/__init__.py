@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 from hframe_id import __version__
 from hframe_id.cli import (
+    control_command,
     datasets_command,
     export_command,
     inspect_command,
@@ -22,6 +23,8 @@ from hframe_id.cli import (
     params_command,
     record_command,
     reduce_command,
+    reproduce_command,
+    simulate_command,
 )
 from hframe_id.errors import HframeIdError
 
@@ -34,6 +37,9 @@ COMMAND_MODULES = (
     record_command,
     inspect_command,
     datasets_command,
+    simulate_command,
+    control_command,
+    reproduce_command,
 )
 
 

@@ -1,0 +1,219 @@
+"""``hframe-id control``: simulate the two motor-angle PID loops of Chapter 5 on a path.
+
+Prints the per-leg path metrics of Tables 5.1-5.9 (text, or JSON with ``--json``) and with
+``--plot DIR`` writes the thesis's views (Fig. 5.9, 5.11, 5.13, 5.18). All options are checked
+and the run simulated before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hframe_id.control.closed_loop import check_hframe, simulate_closed_loop
+from hframe_id.control.metrics import leg_metrics, metrics_json
+from hframe_id.control.pid import SAMPLE_PERIOD_S, ControllerOptions, PIDGains
+from hframe_id.control.trajectory import (
+    SQUARE_F_A,
+    SQUARE_SIDE_M,
+    SQUARE_V_MAX_M_PER_S,
+    Workspace,
+    point_to_point,
+    square,
+)
+from hframe_id.errors import OptionError
+from hframe_id.models import VARIANTS, build_model
+from hframe_id.parameters import load_parameter_file
+from hframe_id.simulation.friction import FRICTION_MODELS, FrictionOptions
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "control",
+        help="closed-loop PID simulation on the test square or point-to-point moves",
+        description="Two independent reset-windup PID loops on the motor angles (Chapter 5, "
+        "Appendix A), zero-order holds at the sample time, on an H-frame model. Prints the "
+        "overshoot and maximum offset of every leg (docs/control.md). Lengths in m, speeds in "
+        "m/s (the thesis's 1 in square at 6 in/s: 0.0254 m, 0.1524 m/s).",
+    )
+    parser.add_argument("--params", type=Path, required=True, help="H-frame parameter file")
+    parser.add_argument(
+        "--variant", choices=VARIANTS, help="require the parameter file to be of this variant"
+    )
+    gains = parser.add_argument_group("controller")
+    gains.add_argument("--kp", type=float, required=True, help="K_P [V/rad]")
+    gains.add_argument("--ki", type=float, default=0.0, help="K_I [V/(rad s)] (0: PD)")
+    gains.add_argument("--kd", type=float, default=0.0, help="K_D [V s/rad]")
+    gains.add_argument(
+        "--motor2-gain-scale",
+        type=float,
+        default=1.0,
+        help="multiply motor 2's gains (section 5.7 uses 1.1)",
+    )
+    gains.add_argument(
+        "--sample-time", type=float, default=SAMPLE_PERIOD_S, help="T [s] (default 0.001)"
+    )
+    gains.add_argument(
+        "--delay-samples",
+        type=int,
+        default=0,
+        help="samples between computing and applying a voltage (default 0, as Fig. 5.8)",
+    )
+    path = parser.add_argument_group("trajectory")
+    path.add_argument("--trajectory", choices=("square", "points"), default="square")
+    path.add_argument("--side", type=float, default=SQUARE_SIDE_M, help="square side [m]")
+    path.add_argument(
+        "--v-max", type=float, default=SQUARE_V_MAX_M_PER_S, help="leg speed v_max [m/s]"
+    )
+    path.add_argument("--f-a", type=float, default=SQUARE_F_A, help="T_a / T (eq. 5.8)")
+    path.add_argument(
+        "--points",
+        metavar="X,Y;X,Y;...",
+        help="points: the path's corners [m], the first being the start",
+    )
+    path.add_argument("--dwell", type=float, default=0.0, help="points: hold at each corner [s]")
+    path.add_argument(
+        "--settle",
+        type=float,
+        default=None,
+        help="hold after the last leg [s] (square 0, points 0.2)",
+    )
+    path.add_argument(
+        "--workspace",
+        type=float,
+        nargs=4,
+        metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
+        help="reachable rectangle [m] (default +/-0.1 m)",
+    )
+    parser.add_argument("--friction", choices=FRICTION_MODELS, default="smooth")
+    parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
+    out = parser.add_argument_group("output")
+    out.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    out.add_argument("--plot", type=Path, metavar="DIR", help="write the four figures here")
+    out.add_argument("--csv", type=Path, help="write the closed-loop signals to this CSV file")
+    parser.set_defaults(handler=run)
+
+
+def _points(text: str | None) -> list[tuple[float, float]]:
+    if not text:
+        raise OptionError("--trajectory points needs --points 'X,Y;X,Y;...' [m]")
+    points = []
+    for item in text.split(";"):
+        parts = item.split(",")
+        try:
+            x, y = (float(v) for v in parts)
+        except ValueError:
+            raise OptionError(f"--points: {item!r} is not 'X,Y' in m") from None
+        points.append((x, y))
+    return points
+
+
+def _nonnegative(name: str, value: float | None) -> None:
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        raise OptionError(f"{name} must be >= 0, got {value}")
+
+
+def build_trajectory(args: argparse.Namespace):
+    _nonnegative("--settle", args.settle)
+    _nonnegative("--dwell", args.dwell)
+    if args.trajectory == "square":
+        if args.points is not None:
+            raise OptionError("--points is for --trajectory points")
+        return square(args.side, args.v_max, args.f_a, settle_s=args.settle or 0.0)
+    settle = 0.2 if args.settle is None else args.settle
+    return point_to_point(_points(args.points), args.v_max, args.f_a, args.dwell, settle)
+
+
+def _controller(args: argparse.Namespace) -> ControllerOptions:
+    if not (math.isfinite(args.sample_time) and args.sample_time > 0):
+        raise OptionError(f"--sample-time must be > 0 s, got {args.sample_time}")
+    gains = PIDGains(args.kp, args.ki, args.kd)
+    return ControllerOptions(
+        gains,
+        gains.scaled(args.motor2_gain_scale),
+        args.sample_time,
+        delay_samples=args.delay_samples,
+    )
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    if args.csv is not None and not args.csv.parent.exists():
+        raise OptionError(f"{args.csv.parent} does not exist")
+    if args.plot is not None and args.plot.exists() and not args.plot.is_dir():
+        raise OptionError(f"--plot {args.plot} exists and is not a directory")
+
+
+def _signals(result) -> pd.DataFrame:
+    frame = {"time [s]": result.time_s}
+    for j, axis in enumerate(("x", "y")):
+        frame[f"{axis}_desired [m]"] = result.reference_xy_m[:, j]
+        frame[f"{axis} [m]"] = result.xy_m[:, j]
+    for j in range(2):
+        frame[f"phi{j + 1}_desired [rad]"] = result.reference_phi_rad[:, j]
+        frame[f"phi{j + 1} [rad]"] = result.phi_rad[:, j]
+    for j in range(2):
+        frame[f"u{j + 1} [V]"] = np.append(result.voltages_v[:, j], np.nan)
+        frame[f"I{j + 1} [V]"] = result.integral_v[:, j]
+    return pd.DataFrame(frame)
+
+
+def run(args: argparse.Namespace) -> int:
+    controller = _controller(args)
+    trajectory = build_trajectory(args)
+    workspace = Workspace(*args.workspace) if args.workspace else Workspace()
+    workspace.check(trajectory)
+    friction = FrictionOptions(args.friction)
+    if args.substeps is not None and args.substeps < 1:
+        raise OptionError(f"--substeps must be >= 1, got {args.substeps}")
+    _check_outputs(args)
+    params = load_parameter_file(args.params, args.variant)
+    model = build_model(params.variant)
+    check_hframe(model)
+    result = simulate_closed_loop(
+        model,
+        model.parameter_vector(params.values),
+        trajectory,
+        controller,
+        friction=friction,
+        workspace=workspace,
+        n_substeps=args.substeps,
+    )
+    if not np.isfinite(result.states).all():
+        raise OptionError("the simulation diverged (non-finite states); try more --substeps")
+    metrics = leg_metrics(result.time_s, result.xy_m, trajectory)
+    if args.csv is not None:
+        _signals(result).to_csv(args.csv, index=False)
+    written = []
+    if args.plot is not None:
+        from hframe_id.control.plots import write_control_plots
+
+        written = list(write_control_plots(result, args.plot).values())
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "params": str(args.params),
+                    "variant": params.variant,
+                    "controller": controller.describe(),
+                    "trajectory": trajectory.name,
+                    "friction": friction.model,
+                    "legs": metrics_json(metrics),
+                },
+                indent=2,
+            )
+        )
+    else:
+        print(f"{params.variant} ({args.params}), {controller.describe()}, {trajectory.name}")
+        print(f"{'leg':>4} {'overshoot [m]':>14} {'offset max [m]':>15}")
+        for m in metrics:
+            over = "/" if m.overshoot_m is None else f"{m.overshoot_m:.3e}"
+            print(f"{m.leg:>4} {over:>14} {m.offset_max_m:>15.3e}")
+    for path in [args.csv, *written]:
+        if path is not None and not args.json:
+            print(f"wrote {path}")
+    return 0

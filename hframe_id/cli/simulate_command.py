@@ -1,0 +1,208 @@
+"""``hframe-id simulate``: open-loop simulation of any model from a parameter file.
+
+Inputs: steps / pulses per motor (``--step``), a voltage sequence from CSV (``--csv``, the
+recorder's format) or the commanded voltages of a recording (``--recording``), zero-order held
+at the sample time. Outputs: every state, input and output as CSV (exact model signals), and on
+request an MCAP recording of the same inputs made by the sim rig (sensor models, log format of
+docs/log-format.md) and a plot. Everything is checked and simulated before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hframe_id.errors import OptionError
+from hframe_id.models import VARIANTS, build_model
+from hframe_id.parameters import load_parameter_file
+from hframe_id.simulation.friction import FRICTION_MODELS, FrictionOptions
+from hframe_id.simulation.inputs import MotorStep, change_points, step_inputs
+from hframe_id.simulation.open_loop import SimulationResult, run_open_loop
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "simulate",
+        help="open-loop simulation (steps, pulses, CSV or recorded voltages) to CSV / MCAP",
+        description="Simulate a model open loop with zero-order-held voltages and write the "
+        "signals (states, inputs, outputs, SI units in the column names) as CSV. Inputs: "
+        "--step (repeatable), --csv or --recording.",
+    )
+    parser.add_argument("--params", type=Path, required=True, help="parameter file (YAML)")
+    parser.add_argument(
+        "--variant", choices=VARIANTS, help="require the parameter file to be of this variant"
+    )
+    source = parser.add_argument_group("input (one kind)")
+    source.add_argument(
+        "--step",
+        action="append",
+        default=[],
+        metavar="MOTOR,VOLTS[,START_S[,DURATION_S]]",
+        help="a step (no duration) or pulse on one motor; repeat for more (they add up)",
+    )
+    source.add_argument(
+        "--csv", type=Path, help="voltage sequence, header 'time [s],u1 [V][,u2 [V]]'"
+    )
+    source.add_argument(
+        "--recording", type=Path, help="MCAP recording whose commanded voltages to replay"
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        help="simulated time [s] (needed with --step; --csv: last row + 1 sample; "
+        "--recording: its length)",
+    )
+    parser.add_argument(
+        "--sample-time",
+        type=float,
+        default=None,
+        help="sample (zero-order-hold) period [s] (default 0.001; a recording's own)",
+    )
+    parser.add_argument(
+        "--friction",
+        choices=FRICTION_MODELS,
+        default="smooth",
+        help="Coulomb friction law: smooth (tanh, the model's) or stick-slip (Table 2.2)",
+    )
+    parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
+    parser.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    parser.add_argument(
+        "--mcap",
+        type=Path,
+        help="also record the same inputs with the sim rig (sensor models) to this MCAP file",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="--mcap: sensor noise seed (0)")
+    parser.add_argument("--plot", type=Path, metavar="DIR", help="write open_loop.png here")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    parser.set_defaults(handler=run)
+
+
+def _positive(name: str, value: float | None) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise OptionError(f"{name} must be > 0, got {value}")
+
+
+def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float, str]:
+    """(table, sample time, description) from exactly one kind of input."""
+    kinds = [name for name in ("step", "csv", "recording") if getattr(args, name)]
+    if len(kinds) != 1:
+        raise OptionError(
+            "give exactly one kind of input: --step (repeatable), --csv or --recording"
+            + (f" (got {', '.join('--' + k for k in kinds)})" if kinds else "")
+        )
+    _positive("--sample-time", args.sample_time)
+    _positive("--duration", args.duration)
+    if args.recording:
+        from hframe_id.recordings.reader import read_recording
+
+        recording = read_recording(args.recording)
+        if recording.inputs.shape[1] != n_inputs:
+            raise OptionError(
+                f"{args.recording}: {recording.inputs.shape[1]} input(s), the model has {n_inputs}"
+            )
+        dt = args.sample_time or recording.sample_period_s
+        if not math.isclose(dt, recording.sample_period_s, rel_tol=1e-9):
+            raise OptionError(
+                f"{args.recording} is sampled at {recording.sample_period_s} s; drop --sample-time"
+            )
+        table = np.nan_to_num(recording.inputs, nan=0.0)
+        if args.duration is not None:
+            table = table[: max(1, int(round(args.duration / dt)))]
+        return table, dt, f"recording {args.recording.name}"
+    dt = args.sample_time or 1e-3
+    if args.csv:
+        from hframe_id.rig.protocols import load_sequence_csv
+
+        protocol = load_sequence_csv(args.csv, args.duration)
+        if protocol.n_inputs != n_inputs:
+            raise OptionError(
+                f"{args.csv}: {protocol.n_inputs} voltage column(s), the model has {n_inputs}"
+            )
+        return protocol.table(dt), dt, f"sequence {args.csv.name}"
+    if args.duration is None:
+        raise OptionError("--step needs --duration (simulated time [s])")
+    steps = [MotorStep.parse(text) for text in args.step]
+    return step_inputs(steps, n_inputs, args.duration, dt), dt, "steps " + " ".join(args.step)
+
+
+def _frame(result: SimulationResult) -> pd.DataFrame:
+    data = {"time [s]": result.time_s}
+    for j, label in enumerate(result.input_labels):
+        data[label] = np.append(result.inputs[:, j], np.nan)  # nothing is held after t_N
+    for j, label in enumerate(result.output_labels):
+        data[f"output {label}"] = result.outputs[:, j]
+    for j, label in enumerate(result.state_labels):
+        data[f"state {label}"] = result.states[:, j]
+    return pd.DataFrame(data)
+
+
+def _check_writable(args: argparse.Namespace) -> None:
+    for path in (args.out, args.mcap):
+        if path is None:
+            continue
+        if path.exists() and not args.overwrite:
+            raise OptionError(f"{path} exists; pass --overwrite to replace it")
+        if not path.parent.exists():
+            raise OptionError(f"{path.parent} does not exist")
+    if args.mcap is not None and args.mcap.suffix != ".mcap":
+        raise OptionError(f"--mcap needs a .mcap file name, got {args.mcap}")
+
+
+def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source: str) -> str:
+    from hframe_id.rig.logger import RunOptions, run_experiment
+    from hframe_id.rig.protocols import SequenceProtocol
+    from hframe_id.rig.sim import SimRig
+
+    times, volts = change_points(table, dt)
+    protocol = SequenceProtocol(times, volts, table.shape[0] * dt, source=source)
+    rig = SimRig(params, seed=args.seed, sample_period_s=dt, paced=False, n_substeps=n_substeps)
+    try:
+        summary = run_experiment(
+            rig,
+            protocol,
+            RunOptions(
+                out=args.mcap,
+                overwrite=args.overwrite,
+                reproducible=True,
+                handle_signals=False,
+                notes=f"hframe-id simulate: {source}",
+            ),
+        )
+    finally:
+        rig.close()
+    state = f"aborted: {summary.abort_reason}" if summary.aborted else "complete"
+    return f"wrote {args.mcap} ({summary.samples} samples, sim rig, seed {args.seed}, {state})"
+
+
+def run(args: argparse.Namespace) -> int:
+    params = load_parameter_file(args.params, args.variant)
+    model = build_model(params.variant)
+    friction = FrictionOptions(args.friction)
+    if args.substeps is not None and args.substeps < 1:
+        raise OptionError(f"--substeps must be >= 1, got {args.substeps}")
+    if args.mcap is not None and friction.model != "smooth":
+        raise OptionError("--mcap records with the sim rig, which simulates smooth friction only")
+    _check_writable(args)
+    table, dt, source = _inputs(args, model.n_inputs)
+    p = model.parameter_vector(params.values)
+    result = run_open_loop(model, p, table, dt, friction=friction, n_substeps=args.substeps)
+    if not np.isfinite(result.states).all():
+        raise OptionError("the simulation diverged (non-finite states); try more --substeps")
+    _frame(result).to_csv(args.out, index=False)
+    print(f"wrote {args.out} ({table.shape[0]} samples of {dt * 1e3:g} ms, {params.variant}, "
+          f"{friction.model} friction, {source})")  # fmt: skip
+    if args.mcap is not None:
+        from hframe_id.simulation.open_loop import default_substeps
+
+        n = args.substeps or default_substeps(model, p, dt, friction)
+        print(_record(args, params, table, dt, n, source))
+    if args.plot is not None:
+        from hframe_id.simulation.plots import write_open_loop_plot
+
+        title = f"{params.variant}: {source}"
+        print(f"wrote {write_open_loop_plot(result, args.plot / 'open_loop.png', title)}")
+    return 0
