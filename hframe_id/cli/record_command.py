@@ -8,6 +8,8 @@ from pathlib import Path
 
 from hframe_id.errors import OptionError
 from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
+from hframe_id.recordings.writer import Attachment
 from hframe_id.rig.logger import RunOptions, run_experiment
 from hframe_id.rig.protocols import PulseProtocol, StepProtocol, load_sequence_csv
 
@@ -152,6 +154,11 @@ def run(args: argparse.Namespace) -> int:
     rig = make_rig(args)
     try:
         protocol = _protocol(args, len(rig.info.inputs))
+        attachments = []
+        if args.protocol == "csv":
+            attachments.append(
+                Attachment(PROTOCOL_ATTACHMENT, "text/csv", Path(args.csv).read_bytes())
+            )
         show = None if args.quiet or not sys.stderr.isatty() else _progress_display(sys.stderr)
         summary = run_experiment(
             rig,
@@ -163,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
                 progress=show,
                 notes=args.notes,
             ),
+            attachments,
         )
     finally:
         rig.close()

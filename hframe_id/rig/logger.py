@@ -302,9 +302,10 @@ def run_experiment(
             closed = [name for name, on in sample.limits.items() if on]
             if closed:
                 reason, kind = f"limit switch {', '.join(closed)} closed", "limit"
-            if k >= n_planned:  # device time ran past the plan (lost samples at the end)
-                volts = zero
-            elif reason is not None:
+            if k >= n_planned:  # the last planned samples were lost: the run is over
+                rig.set_voltages(sample.sequence, zero)
+                break
+            if reason is not None:
                 volts = zero
             else:
                 volts = clamped_table[k]
