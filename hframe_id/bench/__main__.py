@@ -8,7 +8,7 @@ import platform
 import sys
 
 #: Section modules under hframe_id.bench; each has ``run() -> None`` that prints its results.
-SECTIONS: tuple[str, ...] = ()
+SECTIONS: tuple[str, ...] = ("logging",)
 
 
 def main(argv: list[str] | None = None) -> int:
