@@ -99,3 +99,12 @@ def test_regenerating_gives_the_same_recordings(tmp_path):
         np.testing.assert_array_equal(made.valid, shipped.valid)
         assert made.rig == shipped.rig
         assert made.experiment == shipped.experiment
+
+
+def test_datasets_commands(capsys):
+    from hframe_id.cli import main
+
+    assert main(["datasets", "verify", "--dir", str(DATASETS_DIR)]) == 0
+    assert "every file matches the manifest" in capsys.readouterr().out
+    assert main(["datasets", "list"]) == 0
+    assert "4V_xmotion.mcap" in capsys.readouterr().out

@@ -391,3 +391,16 @@ def test_metadata_round_trip():
     decoded = fmt.decode_metadata(encoded)
     assert decoded == {"a": 1, "b": 0.001, "c": True, "d": "u1,u2", "e": "text",
                        "format_version": "1.0"}  # fmt: skip
+
+
+def test_inspect_reports_a_salvaged_file(hframe_file, tmp_path, capsys):
+    from hframe_id.cli import main
+
+    cut = tmp_path / "cut.mcap.partial"
+    cut.write_bytes(hframe_file.read_bytes()[: chunk_ends(hframe_file)[1]])
+    assert main(["inspect", str(cut)]) == 0
+    printed = capsys.readouterr().out
+    assert "warning:" in printed and "recovered 200 samples" in printed
+    assert "UNFINISHED, salvaged" in printed
+    assert main(["inspect", str(tmp_path / "none.mcap")]) == 2
+    assert "no such file" in capsys.readouterr().err

@@ -125,3 +125,18 @@ def test_real_time_run_records_every_sample(tmp_path):
 def test_no_device_on_the_port(tmp_path):
     with pytest.raises(RigFault, match="cannot open the serial port"):
         SerialRig(str(tmp_path / "ttyNOPE"))
+
+
+def test_record_command_on_the_serial_rig(tmp_path, capsys):
+    from hframe_id.cli import main
+
+    out = tmp_path / "serial.mcap"
+    with emulator("--lockstep") as port:
+        argv = ["record", "--rig", "serial", "--port", port, "--v1", "-4", "--v2", "4",
+                "--step", "0.1", "--duration", "0.15", "--out", str(out)]  # fmt: skip
+        assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "samples        150 of 150 planned" in printed and "aborted        no" in printed
+    recording = read_recording(out)
+    assert recording.rig["backend"] == "serial" and recording.rig["serial_number"].startswith("EMU")
+    assert recording.rig["device.plant_parameters"] == "hframe-8-table4.2.yaml"
