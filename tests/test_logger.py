@@ -250,7 +250,7 @@ def test_sigkill_loses_at_most_the_last_250_ms(tmp_path):
     assert partial.exists() and not out.exists()
     with pytest.warns(TruncatedRecordingWarning, match="recovered") as caught:
         recording = read_recording(partial)
-    print(caught[0].message)
+    print(f"last sample taken {last_taken}:", caught[0].message)
     recovered_last = recording.n_samples - 1  # no samples are lost on the sim rig
     assert recording.truncated and recording.sequence_gaps == ()
     # The bound: everything up to at most 250 ms (250 samples) before the kill.
