@@ -1,0 +1,467 @@
+"""``fit_recordings``: data + model + free parameters -> estimates with honest uncertainty.
+
+The chain (PyBOP-style plain objects): recordings -> :class:`FitProblem` (checked) ->
+:class:`MultipleShooting` (transcription) -> :class:`GaussNewton` (solver, stages) ->
+:mod:`statistics` (covariance, identifiability) -> :class:`FitResult`.
+
+Stages (see ``docs/fitting.md`` for the measurements behind them):
+
+1. independent windows sharing the parameters (no continuity), at the first smoothing of
+   the continuation schedule: every window is a short fit from a node that starts at the
+   measurements, so a start off by factors of 3 cannot drift away from the data;
+2. full continuity (condensed Gauss-Newton) at each smoothing of the schedule, the last being
+   the model's;
+3. statistics at the optimum; a free parameter whose relative standard error exceeds the
+   identifiability threshold is held at its initial value and stage 2 re-run, one parameter
+   at a time (the worst first, since fixing one of a collinear pair identifies the other).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from hframe_id.errors import FitError
+from hframe_id.fitting.designs import standard_designs
+from hframe_id.fitting.options import FitOptions, FitProgress
+from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
+from hframe_id.fitting.statistics import Statistics, compute_statistics
+from hframe_id.parameters import ParameterSet
+from hframe_id.recordings.recording import Recording
+
+#: Tolerances of the intermediate stages (the last stage uses the options' step_tol):
+#: they only need to bring the iterate into the next stage's basin.
+WINDOWS_STEP_TOL = 1e-3
+INTERMEDIATE_STEP_TOL = 1e-4
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """One parameter of a fit (SI units).
+
+    ``std_error`` and ``ci95`` come from the covariance chosen in the options (robust to
+    correlated residuals by default); the interval is symmetric in log(p), so it is
+    [p / f, p * f] with f = exp(z * relative_std). Fixed parameters have zero error and
+    ``free`` False; free parameters the data do not identify are held at their initial
+    value, with ``identified`` False and the standard error they had when found out.
+    """
+
+    name: str
+    unit: str
+    initial: float
+    estimate: float
+    std_error: float
+    ci95: tuple[float, float]
+    identified: bool
+    free: bool
+    relative_std: float = 0.0
+    relative_std_gn: float = 0.0
+    collinearity: float = 1.0
+    at_bound: bool = False
+    identified_by: tuple[str, ...] = ()
+
+    @property
+    def key(self) -> str:
+        return f"{self.name} [{self.unit}]"
+
+
+@dataclass
+class FitResult:
+    """What a fit produced. ``parameters`` holds every parameter (fitted and fixed)."""
+
+    success: bool
+    message: str
+    parameters: ParameterSet
+    estimates: dict[str, ParameterEstimate]
+    cost: float
+    iterations: int
+    wall_time_s: float
+    correlation: np.ndarray
+    free_names: tuple[str, ...]
+    initial: ParameterSet
+    options: FitOptions
+    stages: list[StageReport] = field(default_factory=list)
+    statistics: Statistics | None = None
+    not_identified: tuple[str, ...] = ()
+    initial_states: np.ndarray | None = None  # (experiments, n_x) estimated
+    experiment_names: tuple[str, ...] = ()
+    evaluations: int = 0
+    problem: FitProblem | None = field(default=None, repr=False)
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def variant(self) -> str:
+        return self.parameters.variant
+
+    def summary(self) -> str:
+        """A one-screen table: parameter, initial, fitted +/- 95 %, identified."""
+        lines = [f"{'parameter':<22} {'initial':>11} {'fitted':>11} {'95 % interval':>25}  status"]
+        for est in self.estimates.values():
+            if not est.free:
+                continue
+            status = "identified" if est.identified else "NOT identified (held)"
+            if est.at_bound:
+                status += ", at bound"
+            lines.append(
+                f"{est.key:<22} {est.initial:>11.5g} {est.estimate:>11.5g} "
+                f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]  {status}"
+            )
+        lines.append(
+            f"{'success' if self.success else 'FAILED'}: {self.message} "
+            f"(cost {self.cost:.6g}, {self.iterations} iterations, {self.wall_time_s:.2f} s)"
+        )
+        return "\n".join(lines)
+
+
+def _progress_sink(options: FitOptions):
+    if options.progress is not None:
+        return options.progress
+    if options.verbose:
+
+        def printer(p: FitProgress) -> None:
+            print(
+                f"  {p.stage:<30} it {p.iteration:3d}  cost {p.cost:12.6g}  "
+                f"step {p.step:8.1e}  defect {p.defect:8.1e}"
+                + (f"  {p.message}" if options.verbose > 1 else ""),
+                file=sys.stderr,
+                flush=True,
+            )
+
+        return printer
+    return None
+
+
+def _scaled(smoothing: tuple[float, float], factor: float) -> tuple[float, float]:
+    return (smoothing[0] * factor, smoothing[1] * factor)
+
+
+def _stats(gn: GaussNewton, state: SolverState, problem: FitProblem) -> Statistics:
+    ev = state.evaluation
+    jac, residual, blocks = gn.condensed_jacobian(ev, state.nodes, state.active)
+    n_nuisance = gn.ms.nx * len(problem.experiments)
+    names = tuple(n for n, a in zip(problem.free_names, state.active, strict=True) if a)
+    return compute_statistics(jac, residual, blocks, n_nuisance, names, problem.options.uncertainty)
+
+
+def fit_recordings(
+    recordings: list[Recording], initial: ParameterSet, options: FitOptions | None = None
+) -> FitResult:
+    """Fit a model's parameters to one or more recordings jointly (multiple shooting).
+
+    Parameters
+    ----------
+    recordings : experiments of one rig and model variant (``Recording``).
+    initial : starting parameter values (and the values of the fixed parameters).
+    options : what is free, bounds, weights, transcription and solver settings.
+
+    Returns
+    -------
+    FitResult. ``success`` is False (with the reason in ``message``) if a stage did not
+    converge or a free parameter ended at a bound.
+
+    Raises
+    ------
+    FitError : before any solving, for a problem that cannot be fitted (mixed rigs or
+        variants, unknown parameter names, bounds excluding the initial value, too few
+        valid samples).
+    """
+    options = options or FitOptions()
+    start = time.perf_counter()
+    problem = build_problem(recordings, initial, options)
+    ms = MultipleShooting(problem)
+    gn = GaussNewton(ms, _progress_sink(options))
+    nodes, velocity = ms.initial_nodes(problem.p_initial)
+    n_free = len(problem.free)
+    state = SolverState(
+        nodes, np.zeros(n_free), np.ones(n_free, dtype=bool), velocity_hint=velocity
+    )
+    smoothing = problem.smoothing
+    schedule = options.smoothing_schedule
+    stages: list[StageReport] = []
+    if options.first_stage:
+        stages.append(
+            gn.run(
+                state,
+                "windows",
+                _scaled(smoothing, schedule[0]),
+                options.max_iterations,
+                WINDOWS_STEP_TOL,
+                math.inf,
+                radius=1.0,
+            )
+        )
+    for factor in schedule:
+        last = factor == schedule[-1]
+        stages.append(
+            gn.run(
+                state,
+                "continuity",
+                _scaled(smoothing, factor),
+                options.max_iterations,
+                options.step_tol if last else INTERMEDIATE_STEP_TOL,
+                options.defect_tol,
+                radius=0.5,
+            )
+        )
+    held: dict[str, tuple[float, float, float]] = {}
+    stats = _stats(gn, state, problem)
+    for _ in range(n_free):
+        if not stages[-1].converged:
+            break
+        active = np.flatnonzero(state.active)
+        worst = int(np.argmax(stats.relative_std))
+        if stats.relative_std[worst] <= options.identifiability_threshold:
+            break
+        index = int(active[worst])
+        held[problem.free_names[index]] = (
+            float(stats.relative_std[worst]),
+            float(stats.relative_std_gn[worst]),
+            float(stats.collinearity[worst]),
+        )
+        state.active[index] = False
+        state.theta[index] = 0.0
+        if not state.active.any():
+            break
+        stages.append(
+            gn.run(
+                state,
+                "continuity",
+                smoothing,
+                options.max_iterations,
+                options.step_tol,
+                options.defect_tol,
+                radius=0.5,
+            )
+        )
+        stats = _stats(gn, state, problem)
+    return _result(problem, ms, gn, state, stages, stats, held, start)
+
+
+def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
+    options = problem.options
+    final = stages[-1]
+    p = problem.parameters(state.theta)
+    names = problem.model.parameter_names
+    specs = {s.name: s for s in problem.model.parameters}
+    z = stats.z_value(options.confidence)
+    estimates: dict[str, ParameterEstimate] = {}
+    at_bound = []
+    active_names = stats.names
+    for i, name in enumerate(names):
+        spec = specs[name]
+        value = float(p[i])
+        initial_value = float(problem.p_initial[i])
+        if i not in problem.free:
+            estimates[name] = ParameterEstimate(
+                name, spec.unit, initial_value, value, 0.0, (value, value), False, False
+            )
+            continue
+        f = problem.free.index(i)
+        if name in active_names:
+            k = active_names.index(name)
+            rel, rel_gn, col = (
+                float(stats.relative_std[k]),
+                float(stats.relative_std_gn[k]),
+                float(stats.collinearity[k]),
+            )
+            identified = True
+        else:
+            rel, rel_gn, col = held.get(name, (math.inf, math.inf, math.inf))
+            identified = False
+        bound = bool(
+            state.active[f]
+            and (
+                state.theta[f] <= problem.log_lower[f] + 1e-9
+                or state.theta[f] >= problem.log_upper[f] - 1e-9
+            )
+        )
+        if bound:
+            at_bound.append(name)
+        factor = math.exp(min(z * rel, 700.0))
+        estimates[name] = ParameterEstimate(
+            name=name,
+            unit=spec.unit,
+            initial=initial_value,
+            estimate=value,
+            std_error=value * rel,
+            ci95=(value / factor, value * factor),
+            identified=identified,
+            free=True,
+            relative_std=rel,
+            relative_std_gn=rel_gn,
+            collinearity=col,
+            at_bound=bound,
+        )
+    not_identified = tuple(n for n in problem.free_names if n in held)
+    if not_identified:
+        _which_experiments(problem, ms, gn, state, stats, estimates, not_identified)
+    success = final.converged and not at_bound
+    if not final.converged:
+        message = f"did not converge: {final.message}"
+    elif at_bound:
+        message = f"ended at a bound: {', '.join(at_bound)} (widen --bounds or fix them)"
+    else:
+        message = final.message
+        if not_identified:
+            message += f"; not identified (held at initial value): {', '.join(not_identified)}"
+    values = {n: float(v) for n, v in zip(names, p, strict=True)}
+    values.update({k: v for k, v in problem.initial.values.items() if k not in values})
+    parameters = ParameterSet(
+        variant=problem.initial.variant,
+        values=values,
+        title=f"{problem.initial.variant} fitted to {len(problem.experiments)} recording(s)",
+        source="hframe-id fit (multiple shooting, Gauss-Newton)",
+        references=list(problem.initial.references),
+    )
+    first = ms.first_window
+    return FitResult(
+        success=success,
+        message=message,
+        parameters=parameters,
+        estimates=estimates,
+        cost=float(state.evaluation.cost),
+        iterations=int(sum(s.iterations for s in stages)),
+        wall_time_s=time.perf_counter() - start,
+        correlation=stats.correlation,
+        free_names=stats.names,
+        initial=problem.initial,
+        options=options,
+        stages=stages,
+        statistics=stats,
+        not_identified=not_identified,
+        initial_states=state.nodes[first].copy(),
+        experiment_names=tuple(e.name for e in problem.experiments),
+        evaluations=gn.evaluations,
+        problem=problem,
+        diagnostics={
+            "noise_scale": stats.noise_scale,
+            "hac_bandwidths": stats.bandwidths,
+            "collinearity_of_set": stats.collinearity_set,
+            "max_defect": final.max_defect,
+            "substeps": list(final.substeps),
+        },
+    )
+
+
+def _which_experiments(problem, ms, gn, state, stats, estimates, not_identified) -> None:
+    """For each parameter the data do not identify, the standard experiments that would.
+
+    The information of a candidate experiment is computed at the fitted parameters from
+    noise-free simulated data, reduced to the parameters (its initial state eliminated), and
+    added to the data's; the parameter counts as identified if its textbook relative error,
+    scaled by the data's ratio of robust to textbook errors, is below the threshold.
+    """
+    options = problem.options
+    all_free = np.ones(len(problem.free), dtype=bool)
+    jac, _, _ = gn.condensed_jacobian(state.evaluation, state.nodes, all_free)
+    n_nuisance = ms.nx * len(problem.experiments)
+    info_data = _reduced_information(jac, n_nuisance)
+    ratio = 1.0
+    if stats.relative_std_gn.size:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratios = stats.relative_std / stats.relative_std_gn
+        ratios = ratios[np.isfinite(ratios)]
+        ratio = float(np.median(ratios)) if ratios.size else 1.0
+    ratio *= stats.noise_scale
+    p = problem.parameters(state.theta)
+    present = {e.name.removesuffix(".mcap") for e in problem.experiments}
+    candidates = []
+    for design in standard_designs(problem.model.variant, problem.sample_period_s):
+        if design.name in present:
+            continue
+        try:
+            info = _design_information(problem, design, p, state.theta)
+        except FitError:
+            continue
+        candidates.append((design.name, info))
+    index = {n: problem.free_names.index(n) for n in not_identified}
+
+    def identified_with(info: np.ndarray, name: str) -> bool:
+        cov = np.linalg.pinv(info, hermitian=True)
+        std = math.sqrt(max(cov[index[name], index[name]], 0.0)) * ratio
+        return std <= options.identifiability_threshold
+
+    for name in not_identified:
+        single = tuple(n for n, info in candidates if identified_with(info_data + info, name))
+        if not single and candidates:
+            total = info_data + sum(info for _, info in candidates)
+            single = (
+                ("all of " + ", ".join(n for n, _ in candidates),)
+                if identified_with(total, name)
+                else ()
+            )
+        estimates[name] = replace(estimates[name], identified_by=single)
+
+
+def _reduced_information(jac: np.ndarray, n_nuisance: int) -> np.ndarray:
+    info = jac.T @ jac
+    if not n_nuisance:
+        return info
+    a = info[:n_nuisance, :n_nuisance]
+    b = info[:n_nuisance, n_nuisance:]
+    return info[n_nuisance:, n_nuisance:] - b.T @ np.linalg.lstsq(a, b, rcond=None)[0]
+
+
+def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.ndarray):
+    """Reduced information about the free log-parameters of one candidate experiment."""
+    from hframe_id.recordings.sensors import SensorModel
+    from hframe_id.simulation.open_loop import simulate
+
+    rec0 = problem.experiments[0].recording
+    model = problem.model
+    rig = dict(rec0.rig)
+    sensors = SensorModel(
+        laser_min_m=float(rig.get("laser_min_m", -math.inf)),
+        laser_max_m=float(rig.get("laser_max_m", math.inf)),
+    )
+    applied = design.inputs
+    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
+        applied = SensorModel(
+            dac_bits=int(rig["dac_bits"]),
+            dac_min_v=float(rig["dac_min_v"]),
+            dac_max_v=float(rig["dac_max_v"]),
+        ).dac(design.inputs)
+    states = simulate(model, p, applied, problem.sample_period_s, smoothing=problem.smoothing)
+    outputs = np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T
+    valid = np.ones_like(outputs, dtype=bool)
+    for j, s in enumerate(model.outputs):
+        if s.unit == "m":
+            valid[:, j] = (outputs[:, j] >= sensors.laser_min_m) & (
+                outputs[:, j] <= sensors.laser_max_m
+            )
+    rec = Recording(
+        variant=rec0.variant,
+        sample_period_s=problem.sample_period_s,
+        time_s=np.arange(outputs.shape[0]) * problem.sample_period_s,
+        inputs=design.inputs,
+        input_names=rec0.input_names,
+        outputs=np.where(valid, outputs, np.nan),
+        output_names=tuple(s.name for s in model.outputs),
+        valid=valid,
+        rig=rig,
+        experiment={"design": design.name},
+    )
+    fitted = problem.initial.replace_values(
+        **{n: float(v) for n, v in zip(model.parameter_names, p, strict=True)}
+    )
+    options = FitOptions(
+        free=problem.free_names,
+        channel_std=dict(zip(problem.output_names, problem.channel_std.tolist(), strict=True)),
+        shooting_interval=problem.options.shooting_interval,
+        smoothing=problem.smoothing,
+        threads=problem.options.threads,
+    )
+    sub = build_problem([rec], fitted, options)
+    ms = MultipleShooting(sub)
+    nodes = np.array([states[k] for k in ms.window_start])
+    gn = GaussNewton(ms)
+    ev = ms.evaluate(nodes, np.zeros(len(sub.free)), sub.smoothing)
+    jac, _, _ = gn.condensed_jacobian(ev, nodes, np.ones(len(sub.free), dtype=bool))
+    return _reduced_information(jac, ms.nx)

@@ -1,0 +1,211 @@
+"""Options of a fit: which parameters are free, bounds, weights, transcription and solver.
+
+``FitOptions`` validates every field on construction with a message a user can act on; the
+checks that need the model or the data (unknown parameter names, bounds that exclude the
+initial value) run in :mod:`hframe_id.fitting.problem` before any solving starts.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from hframe_id.errors import OptionError
+
+#: Parameters held fixed by default: geometry and motor constants are measured (data sheet,
+#: calipers), not identified; g_1 = 1 fixes the scale between voltage and torque (K_t g / R),
+#: which output-error data cannot separate from the inertias otherwise. g_2 is free: it absorbs
+#: the difference between the two amplifiers (section 4.3).
+DEFAULT_FIXED = ("r", "K_t", "K_e", "R", "g_1", "l_l0", "l_r0", "l_b0")
+
+UNCERTAINTY_METHODS = ("hac", "gauss-newton")
+
+
+@dataclass(frozen=True)
+class FitProgress:
+    """One line of progress, passed to ``FitOptions.progress``."""
+
+    stage: str
+    iteration: int
+    cost: float
+    step: float
+    defect: float
+    message: str = ""
+
+
+def _positive(name: str, value: Any, integer: bool = False) -> None:
+    kind = int if integer else (int, float)
+    if isinstance(value, bool) or not isinstance(value, kind):
+        raise OptionError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
+    if not (math.isfinite(value) and value > 0):
+        raise OptionError(f"{name} must be > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """How to fit.
+
+    Attributes
+    ----------
+    free : parameter names or fnmatch patterns (``"k_*"``) to fit; ``None`` selects the
+        variant's default: every stiffness, inertia, mass, viscous and Coulomb friction
+        parameter and g_2 (everything but ``DEFAULT_FIXED``).
+    fix : names or patterns removed from the free set (applied after ``free``).
+    bounds : ``{name: (low, high)}`` in SI units for free parameters. Default: the initial
+        value divided and multiplied by ``bound_factor``.
+    bound_factor : default bound factor (> 1): free parameters stay within [p0 / f, p0 * f].
+    channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
+        by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
+        std for positions (both from the recording's rig metadata).
+    shooting_interval : samples per shooting window (a node every this many samples).
+    smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
+        the model's (1e-3 m/s, 1e-2 rad/s).
+    smoothing_schedule : continuation: factors applied to ``smoothing`` stage by stage,
+        decreasing, ending with 1 (default 10 then 1).
+    first_stage : start with independent windows sharing the parameters (no continuity),
+        which makes starts off by factors of 3 converge (notes: 5-7 of 10 without it).
+    max_iterations : Gauss-Newton iterations per stage.
+    step_tol : converged when no free parameter changes by more than this relative amount
+        (and the continuity defects are below ``defect_tol``). 1e-7 is four orders below
+        the 0.1 % scale of anything a test or a user compares.
+    defect_tol : continuity defects, in units of the measurement noise, at convergence.
+    identifiability_threshold : a free parameter whose relative standard error exceeds this
+        is reported as not identified, fixed at its initial value and the fit re-solved.
+    uncertainty : ``"hac"`` (default): covariance robust to residual autocorrelation
+        (Newey-West sandwich per channel and experiment, which quantization errors need);
+        ``"gauss-newton"``: the textbook sigma^2 (J^T J)^-1 (understates errors 5-10x here).
+    confidence : level of the reported intervals.
+    substep_safety, max_substeps : RK4 substeps are chosen from the current parameters so
+        |lambda| h <= 2.785 / safety (see ``hframe_id.simulation.integrators``), capped.
+    threads : worker threads for evaluating shooting windows.
+    verbose : 0 silent, 1 one line per iteration (to ``progress`` or stderr).
+    progress : callable receiving :class:`FitProgress` after every iteration.
+    """
+
+    free: tuple[str, ...] | None = None
+    fix: tuple[str, ...] = ()
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    bound_factor: float = 10.0
+    channel_std: Mapping[str, float] = field(default_factory=dict)
+    shooting_interval: int = 10
+    smoothing: tuple[float, float] | None = None
+    smoothing_schedule: tuple[float, ...] = (1.0,)
+    first_stage: bool = True
+    max_iterations: int = 60
+    step_tol: float = 1e-7
+    defect_tol: float = 1e-3
+    identifiability_threshold: float = 0.1
+    uncertainty: str = "hac"
+    confidence: float = 0.95
+    substep_safety: float = 1.5
+    max_substeps: int = 200
+    threads: int = field(default_factory=lambda: max(1, min(os.cpu_count() or 1, 8)))
+    verbose: int = 0
+    progress: Callable[[FitProgress], None] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("free", "fix"):
+            value = getattr(self, name)
+            if value is None and name == "free":
+                continue
+            if isinstance(value, str) or not all(isinstance(v, str) and v for v in value):
+                raise OptionError(
+                    f"{name} must be a sequence of parameter names or patterns, got {value!r}"
+                )
+            object.__setattr__(self, name, tuple(value))
+        if self.free is not None and not self.free:
+            raise OptionError("free must name at least one parameter (or be None for defaults)")
+        if not isinstance(self.bounds, Mapping):
+            raise OptionError(f"bounds must map names to (low, high), got {self.bounds!r}")
+        for name, pair in self.bounds.items():
+            if not (isinstance(pair, tuple | list) and len(pair) == 2):
+                raise OptionError(f"bounds[{name!r}] must be (low, high), got {pair!r}")
+            low, high = pair
+            for v in (low, high):
+                if isinstance(v, bool) or not isinstance(v, int | float) or math.isnan(v):
+                    raise OptionError(f"bounds[{name!r}] must be two numbers, got {pair!r}")
+            if not 0 < low < high:
+                raise OptionError(
+                    f"bounds[{name!r}] must satisfy 0 < low < high (parameters are fitted "
+                    f"in log scale), got {pair!r}"
+                )
+        _positive("bound_factor", self.bound_factor)
+        if self.bound_factor <= 1:
+            raise OptionError(f"bound_factor must be > 1, got {self.bound_factor!r}")
+        if not isinstance(self.channel_std, Mapping):
+            raise OptionError(
+                f"channel_std must map output names to numbers, got {self.channel_std!r}"
+            )
+        for name, value in self.channel_std.items():
+            _positive(f"channel_std[{name!r}]", value)
+        if (
+            isinstance(self.shooting_interval, bool)
+            or not isinstance(self.shooting_interval, int)
+            or self.shooting_interval < 1
+        ):
+            raise OptionError(
+                f"shooting interval must be >= 1 sample, got {self.shooting_interval!r}"
+            )
+        if self.smoothing is not None:
+            if len(self.smoothing) != 2:
+                raise OptionError(
+                    f"smoothing must be (linear m/s, angular rad/s), got {self.smoothing!r}"
+                )
+            for value in self.smoothing:
+                _positive("smoothing", value)
+            object.__setattr__(self, "smoothing", tuple(float(v) for v in self.smoothing))
+        schedule = tuple(self.smoothing_schedule)
+        if not schedule:
+            raise OptionError("smoothing_schedule needs at least one factor (1.0)")
+        for value in schedule:
+            _positive("smoothing_schedule factor", value)
+        if any(b > a for a, b in zip(schedule, schedule[1:], strict=False)):
+            raise OptionError(f"smoothing_schedule must not increase, got {schedule!r}")
+        if schedule[-1] != 1:
+            raise OptionError(
+                f"smoothing_schedule must end with 1 (the final smoothing), got {schedule!r}"
+            )
+        object.__setattr__(self, "smoothing_schedule", tuple(float(v) for v in schedule))
+        _positive("max_iterations", self.max_iterations, integer=True)
+        for name in ("step_tol", "defect_tol", "identifiability_threshold", "substep_safety"):
+            _positive(name, getattr(self, name))
+        if self.substep_safety < 1:
+            raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
+        _positive("max_substeps", self.max_substeps, integer=True)
+        if self.uncertainty not in UNCERTAINTY_METHODS:
+            raise OptionError(
+                f"uncertainty must be one of {', '.join(UNCERTAINTY_METHODS)}, "
+                f"got {self.uncertainty!r}"
+            )
+        if not (isinstance(self.confidence, float) and 0 < self.confidence < 1):
+            raise OptionError(f"confidence must be in (0, 1), got {self.confidence!r}")
+        _positive("threads", self.threads, integer=True)
+        if self.verbose not in (0, 1, 2):
+            raise OptionError(f"verbose must be 0, 1 or 2, got {self.verbose!r}")
+        if self.progress is not None and not callable(self.progress):
+            raise OptionError("progress must be callable (FitProgress) -> None")
+
+    def describe(self) -> dict[str, Any]:
+        """The options as plain data for a fit's provenance."""
+        return {
+            "free": list(self.free) if self.free is not None else "default",
+            "fix": list(self.fix),
+            "bounds": {k: [float(a), float(b)] for k, (a, b) in self.bounds.items()},
+            "bound_factor": float(self.bound_factor),
+            "channel_std": {k: float(v) for k, v in self.channel_std.items()},
+            "shooting_interval_samples": int(self.shooting_interval),
+            "smoothing": list(self.smoothing) if self.smoothing else "model default",
+            "smoothing_schedule": list(self.smoothing_schedule),
+            "first_stage": bool(self.first_stage),
+            "max_iterations": int(self.max_iterations),
+            "step_tol": float(self.step_tol),
+            "defect_tol": float(self.defect_tol),
+            "identifiability_threshold": float(self.identifiability_threshold),
+            "uncertainty": self.uncertainty,
+            "confidence": float(self.confidence),
+            "substep_safety": float(self.substep_safety),
+            "max_substeps": int(self.max_substeps),
+        }

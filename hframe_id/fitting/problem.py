@@ -1,0 +1,325 @@
+"""The fitting problem: data + model + free parameters + cost, checked before any solving.
+
+A fit is a weighted output-error least-squares problem over one or more experiments:
+
+    min  1/2 sum_e sum_k sum_j  w_j^2 (y_j(t_k; x0_e, p) - y_meas_j,k)^2    over x0_e, p_free
+
+with w_j = 1 / std_j (encoder quantization step / sqrt(12), laser noise), invalid samples left
+out, free parameters in log scale, theta = ln(p / p_initial), within bounds. The transcription
+(multiple shooting) and the solver (Gauss-Newton) live in their own modules.
+"""
+
+from __future__ import annotations
+
+import difflib
+import fnmatch
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from hframe_id.errors import FitError
+from hframe_id.fitting.options import DEFAULT_FIXED, FitOptions
+from hframe_id.models import Model, build_model
+from hframe_id.parameters import ParameterSet
+from hframe_id.recordings.recording import Recording
+from hframe_id.recordings.sensors import SensorModel
+
+#: Rig metadata keys that identify a physical rig (or the sim plant); recordings fitted
+#: jointly must agree on every one of them that both carry.
+RIG_IDENTITY_KEYS = (
+    "rig_id",
+    "name",
+    "serial",
+    "backend",
+    "plant",
+    "encoder_counts_per_rev",
+    "laser_noise_std_m",
+    "dac_bits",
+)
+
+#: A window needs at least this many valid output values per free quantity it brings; a
+#: whole record needs this many valid values per estimated quantity (states + parameters).
+MIN_VALID_PER_UNKNOWN = 5
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One recording, prepared for fitting (SI, samples on the model's output order)."""
+
+    name: str
+    inputs: np.ndarray  # (N, n_u) voltages the plant saw [V] (after the DAC)
+    outputs: np.ndarray  # (N, n_y) measurements, NaN where missing
+    valid: np.ndarray  # (N, n_y) bool: usable samples
+    recording: Recording
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.inputs.shape[0])
+
+
+@dataclass(frozen=True)
+class FitProblem:
+    """Everything a transcription needs, validated."""
+
+    model: Model
+    initial: ParameterSet
+    p_initial: np.ndarray  # all parameters, model order, SI
+    free: tuple[int, ...]  # indices of free parameters in model order
+    log_lower: np.ndarray  # bounds on theta = ln(p / p_initial), free parameters
+    log_upper: np.ndarray
+    experiments: tuple[Experiment, ...]
+    channel_std: np.ndarray  # (n_y,) [SI]
+    sample_period_s: float
+    smoothing: tuple[float, float]
+    options: FitOptions
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        return tuple(self.model.parameters[i].name for i in self.free)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.model.outputs)
+
+    def parameters(self, theta: np.ndarray) -> np.ndarray:
+        """All parameters (SI, model order) for log-parameters theta of the free ones."""
+        p = self.p_initial.copy()
+        p[list(self.free)] = self.p_initial[list(self.free)] * np.exp(theta)
+        return p
+
+
+def _suggest(word: str, choices: Sequence[str]) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _expand(patterns: Sequence[str], names: Sequence[str], what: str) -> list[str]:
+    selected: list[str] = []
+    for pattern in patterns:
+        matches = fnmatch.filter(names, pattern)
+        if not matches:
+            raise FitError(
+                f"{what}: no parameter matches {pattern!r}{_suggest(pattern, names)}; "
+                f"valid: {', '.join(names)}"
+            )
+        selected += [m for m in matches if m not in selected]
+    return selected
+
+
+def default_free(model: Model) -> list[str]:
+    """Every stiffness, inertia, mass, friction parameter and g_2 (not ``DEFAULT_FIXED``)."""
+    return [name for name in model.parameter_names if name not in DEFAULT_FIXED]
+
+
+def resolve_free(model: Model, options: FitOptions) -> list[str]:
+    names = list(model.parameter_names)
+    free = _expand(options.free, names, "free") if options.free else default_free(model)
+    fixed = _expand(options.fix, names, "fix") if options.fix else []
+    free = [n for n in free if n not in fixed]
+    if not free:
+        raise FitError("no free parameters left after --fix; nothing to fit")
+    return free
+
+
+def applied_inputs(recording: Recording) -> np.ndarray:
+    """Voltages the plant saw: the recording's applied voltages if it has them, else the
+    commanded ones through the rig's DAC (12 bit, +/-10 V unless the rig metadata say)."""
+    applied = getattr(recording, "applied", None)
+    if applied is not None:
+        return np.asarray(applied, dtype=float)
+    rig = recording.rig
+    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
+        dac = SensorModel(
+            dac_bits=int(rig["dac_bits"]),
+            dac_min_v=float(rig["dac_min_v"]),
+            dac_max_v=float(rig["dac_max_v"]),
+        )
+        return dac.dac(recording.inputs)
+    return np.asarray(recording.inputs, dtype=float)
+
+
+def default_channel_std(recording: Recording, output: str) -> float:
+    """Noise std of an output channel from the rig metadata [rad or m]."""
+    rig = recording.rig
+    if output.startswith("phi"):
+        counts = rig.get("encoder_counts_per_rev")
+        if counts is None:
+            raise FitError(
+                f"{recording.name()}: rig metadata lack encoder_counts_per_rev; give "
+                f"channel_std for {output}"
+            )
+        return 2 * math.pi / float(counts) / math.sqrt(12)
+    noise = rig.get("laser_noise_std_m")
+    if noise is None or not float(noise) > 0:
+        raise FitError(
+            f"{recording.name()}: rig metadata lack laser_noise_std_m; give channel_std for "
+            f"{output}"
+        )
+    return float(noise)
+
+
+def _check_rigs(recordings: Sequence[Recording]) -> None:
+    first = recordings[0]
+    for rec in recordings[1:]:
+        if rec.variant != first.variant:
+            raise FitError(
+                f"cannot fit recordings of different model variants jointly: "
+                f"{first.name()} is {first.variant}, {rec.name()} is {rec.variant}"
+            )
+        for key in RIG_IDENTITY_KEYS:
+            if key in first.rig and key in rec.rig and str(first.rig[key]) != str(rec.rig[key]):
+                raise FitError(
+                    f"cannot fit recordings of different rigs jointly: rig {key} is "
+                    f"{first.rig[key]!r} in {first.name()} but {rec.rig[key]!r} in {rec.name()}"
+                )
+        if not math.isclose(rec.sample_period_s, first.sample_period_s, rel_tol=1e-9):
+            raise FitError(
+                f"recordings have different sample periods: {first.sample_period_s} s "
+                f"({first.name()}) and {rec.sample_period_s} s ({rec.name()})"
+            )
+
+
+def _prepare(rec: Recording, model: Model) -> Experiment:
+    inputs = applied_inputs(rec)
+    in_names = [s.name for s in model.inputs]
+    if tuple(rec.input_names) != tuple(in_names):
+        raise FitError(
+            f"{rec.name()}: inputs {list(rec.input_names)} do not match model {model.variant} "
+            f"inputs {in_names}"
+        )
+    columns = []
+    for out in model.outputs:
+        if out.name not in rec.output_names:
+            raise FitError(
+                f"{rec.name()}: no output {out.name!r} (has {list(rec.output_names)}) for model "
+                f"{model.variant}"
+            )
+        columns.append(list(rec.output_names).index(out.name))
+    outputs = np.asarray(rec.outputs, dtype=float)[:, columns]
+    valid = np.asarray(rec.valid, dtype=bool)[:, columns] & np.isfinite(outputs)
+    if not np.all(np.isfinite(inputs)):
+        raise FitError(f"{rec.name()}: inputs contain non-finite values")
+    if rec.aborted:
+        # An aborted run is still a valid record of what the plant did up to the abort.
+        pass
+    return Experiment(rec.name(), inputs, np.where(valid, outputs, np.nan), valid, rec)
+
+
+def build_problem(
+    recordings: Sequence[Recording], initial: ParameterSet, options: FitOptions
+) -> FitProblem:
+    """Check the data and options against the model and assemble the problem.
+
+    Raises ``FitError`` (before any solving) for: no recordings, mixed variants or rigs,
+    unknown free parameter names (suggesting the nearest), a free parameter at zero (log
+    scale), bounds excluding the initial value, too few valid samples.
+    """
+    recordings = list(recordings)
+    if not recordings:
+        raise FitError("no recordings to fit")
+    for rec in recordings:
+        if not isinstance(rec, Recording):
+            raise FitError(f"expected Recording objects, got {type(rec).__name__}")
+    _check_rigs(recordings)
+    if not isinstance(initial, ParameterSet):
+        raise FitError(f"initial must be a ParameterSet, got {type(initial).__name__}")
+    if initial.variant != recordings[0].variant:
+        raise FitError(
+            f"initial parameters are for {initial.variant} but the recordings are "
+            f"{recordings[0].variant} data ({recordings[0].name()})"
+        )
+    model = build_model(initial.variant)
+    p0 = model.parameter_vector(initial.values)
+    names = list(model.parameter_names)
+    free_names = resolve_free(model, options)
+    for name in options.bounds:
+        if name not in names:
+            raise FitError(f"bounds: unknown parameter {name!r}{_suggest(name, names)}")
+        if name not in free_names:
+            raise FitError(f"bounds given for {name!r}, which is not free")
+    lower, upper = [], []
+    for name in free_names:
+        value = p0[names.index(name)]
+        if not value > 0:
+            raise FitError(
+                f"free parameter {name} starts at {value!r}; parameters are fitted in log "
+                f"scale, so a free one needs a start > 0 (give a small positive value)"
+            )
+        low, high = options.bounds.get(
+            name, (value / options.bound_factor, value * options.bound_factor)
+        )
+        if not low <= value <= high:
+            raise FitError(
+                f"bounds for {name} [{low:g}, {high:g}] exclude its initial value {value:g}"
+            )
+        lower.append(math.log(low / value))
+        upper.append(math.log(high / value))
+    free = tuple(names.index(n) for n in free_names)
+
+    outputs = [s.name for s in model.outputs]
+    for name in options.channel_std:
+        if name not in outputs:
+            raise FitError(
+                f"channel_std: unknown output {name!r}{_suggest(name, outputs)}; "
+                f"valid: {', '.join(outputs)}"
+            )
+    experiments = tuple(_prepare(rec, model) for rec in recordings)
+    std = np.array(
+        [
+            options.channel_std.get(name) or default_channel_std(recordings[0], name)
+            for name in outputs
+        ]
+    )
+    n_unknown = model.n_states * len(experiments) + len(free)
+    n_valid = int(sum(e.valid.sum() for e in experiments))
+    for e in experiments:
+        if e.valid.sum() < MIN_VALID_PER_UNKNOWN * model.n_states:
+            raise FitError(
+                f"{e.name}: only {int(e.valid.sum())} valid output samples; a recording needs "
+                f"at least {MIN_VALID_PER_UNKNOWN * model.n_states} to be worth fitting"
+            )
+    if n_valid < MIN_VALID_PER_UNKNOWN * n_unknown:
+        raise FitError(
+            f"too few valid samples: {n_valid} output values for {n_unknown} unknowns "
+            f"(need >= {MIN_VALID_PER_UNKNOWN} per unknown)"
+        )
+    smoothing = options.smoothing or model.options.smoothing
+    return FitProblem(
+        model=model,
+        initial=initial,
+        p_initial=p0,
+        free=free,
+        log_lower=np.array(lower),
+        log_upper=np.array(upper),
+        experiments=experiments,
+        channel_std=std,
+        sample_period_s=float(recordings[0].sample_period_s),
+        smoothing=(float(smoothing[0]), float(smoothing[1])),
+        options=options,
+    )
+
+
+def output_matrix(model: Model) -> np.ndarray:
+    """C with y = C x (every model's outputs are coordinates, so the output map is linear)."""
+    x = ca.SX.sym("x", model.n_states)
+    y = model.output(x)
+    c = ca.jacobian(y, x)
+    if ca.depends_on(c, x):
+        raise FitError(f"{model.variant}: outputs are not linear in the state")
+    return np.array(ca.DM(c))
+
+
+def rigid_modes(model: Model, p: np.ndarray) -> np.ndarray:
+    """Basis (n_q, n_rigid) of coordinate motions that stretch no belt: null space of the
+    stiffness matrix d^2 V / dq^2 (used to fill unmeasured coordinates from measured ones)."""
+    x = ca.SX.sym("x", model.n_states)
+    nq = model.n_states // 2
+    _, potential = model.energy(x, p)
+    hess, _ = ca.hessian(potential, x[:nq])
+    k = np.array(ca.Function("k", [x], [hess])(np.zeros(model.n_states)))
+    u, sing, vt = np.linalg.svd(k)
+    rank = int(np.sum(sing > sing.max() * 1e-9))
+    return vt[rank:].T

@@ -1,0 +1,344 @@
+"""Multiple-shooting transcription of a fit problem.
+
+Every experiment is cut into windows of M samples (``FitOptions.shooting_interval``); the
+state at the start of each window (a shooting node) is a decision variable, initialised from
+the measurements. One evaluation integrates all windows of all experiments at once (one
+mapped CasADi call) and returns, for every window,
+
+- the weighted output residuals r = w (C x_k - y_k) of its samples (0 where invalid),
+- their Jacobian with respect to the window's node state and the free log-parameters,
+- the state at the window's end and its Jacobian (A, B) for the continuity conditions
+  x_end(node_i, p) = node_{i+1}.
+
+Substeps per window: the smoothed Coulomb law makes the dynamics stiff only while a motor
+turns slower than a few smoothing velocities (eigenvalue tau_c / (v_s J) ~ 4.5e4 1/s at rest,
+~300 1/s in motion). Windows in which every stiff velocity keeps its sign and stays clear of
+zero are integrated with the few substeps the belt modes need; the others with the substeps
+the at-rest eigenvalue needs (``stable_substeps``). The split is checked on the computed
+trajectory and a window is recomputed with the fine step if the check fails, so the result
+is the same as with fine steps everywhere (to the integrator's truncation error, ~1e-8 rad).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from hframe_id.fitting.kernel import compiled_substep, window_function
+from hframe_id.fitting.problem import FitProblem, output_matrix, rigid_modes
+from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT
+
+#: Fewest substeps per sample (keeps the belt modes, |lambda| ~ 330 1/s, accurate to ~1e-8).
+MIN_SUBSTEPS = 4
+#: Window groups are padded to a multiple of this, so mapped functions are reused.
+PAD = 16
+
+
+@dataclass
+class Evaluation:
+    """Residuals and derivatives at one point (arrays indexed by window first)."""
+
+    residual: np.ndarray  # (W, M, n_y) weighted residuals
+    jac_node: np.ndarray  # (W, M, n_y, n_x)
+    jac_theta: np.ndarray  # (W, M, n_y, n_f) w.r.t. free log-parameters
+    x_end: np.ndarray  # (W, n_x)
+    a_end: np.ndarray  # (W, n_x, n_x) d x_end / d node
+    b_end: np.ndarray  # (W, n_x, n_f) d x_end / d theta
+    states: np.ndarray  # (W, M + 1, n_x) states at the window's samples and its end
+    n_substeps: tuple[int, int]  # (fast, stiff)
+    n_stiff_windows: int
+
+    @property
+    def cost(self) -> float:
+        return 0.5 * float(np.sum(self.residual**2))
+
+
+class MultipleShooting:
+    """The windows, data layout and evaluation of one problem."""
+
+    def __init__(self, problem: FitProblem, interval: int | None = None):
+        self.problem = problem
+        self.model = problem.model
+        self.m = int(interval or problem.options.shooting_interval)
+        self.dt = problem.sample_period_s
+        self.nx = self.model.n_states
+        self.nq = self.nx // 2
+        self.nu = self.model.n_inputs
+        self.ny = len(self.model.outputs)
+        self.nf = len(problem.free)
+        self.c = output_matrix(self.model)
+        self.threads = problem.options.threads
+        m = self.m
+        exp_of, start, length = [], [], []
+        for e, exp in enumerate(problem.experiments):
+            n = exp.n_samples
+            for k0 in range(0, n, m):
+                exp_of.append(e)
+                start.append(k0)
+                length.append(min(m, n - k0))
+        self.window_experiment = np.array(exp_of)
+        self.window_start = np.array(start)
+        self.window_length = np.array(length)
+        self.n_windows = len(exp_of)
+        w = self.n_windows
+        self.inputs = np.zeros((w, m, self.nu))
+        self.measured = np.zeros((w, m, self.ny))
+        self.weight = np.zeros((w, m, self.ny))
+        for i in range(w):
+            exp = problem.experiments[exp_of[i]]
+            k0, n = start[i], length[i]
+            self.inputs[i, :n] = exp.inputs[k0 : k0 + n]
+            self.inputs[i, n:] = exp.inputs[k0 + n - 1]
+            valid = exp.valid[k0 : k0 + n]
+            self.measured[i, :n] = np.where(valid, exp.outputs[k0 : k0 + n], 0.0)
+            self.weight[i, :n] = valid / problem.channel_std
+        # Windows i and i + 1 of the same experiment are joined by continuity.
+        self.linked = self.window_experiment[:-1] == self.window_experiment[1:]
+        self.window_index_in_experiment = self.window_start // m
+        self.first_window = np.array(
+            [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]
+        )
+        self._buffers: dict = {}
+        self.substep = compiled_substep(self.model, tuple(problem.free))
+        # State scale for continuity defects: the noise of the channel measuring a coordinate
+        # (or the smallest channel noise), velocities that over one sample.
+        scale = np.full(self.nq, float(np.min(problem.channel_std)))
+        for j in range(self.ny):
+            q = int(np.argmax(np.abs(self.c[j, : self.nq])))
+            scale[q] = problem.channel_std[j]
+        self.defect_scale = np.concatenate([scale, scale / self.dt])
+        x = ca.SX.sym("x", self.nx)
+        p = ca.SX.sym("p", len(self.model.parameters))
+        s = ca.SX.sym("s", 2)
+        self._jac_x = ca.Function(
+            "dynamics_jac_x",
+            [x, p, s],
+            [ca.jacobian(self.model.dynamics(x, ca.DM.zeros(self.nu), p, s), x)],
+        )
+
+    def subset(self, windows: np.ndarray) -> MultipleShooting:
+        """The same transcription restricted to some windows, none of them linked (for a
+        cheap first stage of independent windows)."""
+        view = object.__new__(MultipleShooting)
+        view.__dict__.update(self.__dict__)
+        windows = np.asarray(windows)
+        for name in (
+            "window_experiment",
+            "window_start",
+            "window_length",
+            "window_index_in_experiment",
+            "inputs",
+            "measured",
+            "weight",
+        ):
+            setattr(view, name, getattr(self, name)[windows])
+        view.n_windows = len(windows)
+        view.linked = np.zeros(len(windows) - 1, dtype=bool)
+        view._buffers = {}
+        return view
+
+    # ------------------------------------------------------------------ initial guess
+    def initial_nodes(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Node states from the measurements, and a per-sample velocity estimate.
+
+        Positions: measured coordinates where valid; the others (and invalid samples) from
+        the belt-free (rigid) motion fitted to the measured ones, weighted by their noise.
+        Velocities: central differences of the rigid-motion positions (encoder-dominated).
+        Returns nodes (W, n_x) and the velocity estimate (W, M + 1, n_q).
+        """
+        modes = rigid_modes(self.model, p)
+        cq = self.c[:, : self.nq]
+        nodes = np.zeros((self.n_windows, self.nx))
+        velocity = np.zeros((self.n_windows, self.m + 1, self.nq))
+        for e, exp in enumerate(self.problem.experiments):
+            n = exp.n_samples
+            weights = exp.valid / self.problem.channel_std
+            y = np.where(exp.valid, exp.outputs, 0.0)
+            rigid = np.zeros((n, self.nq))
+            design = cq @ modes  # (n_y, n_rigid)
+            for k in range(n):
+                a = design * weights[k][:, None]
+                if np.count_nonzero(weights[k]) >= modes.shape[1]:
+                    coef, *_ = np.linalg.lstsq(a, y[k] * weights[k], rcond=None)
+                    rigid[k] = modes @ coef
+                elif k > 0:
+                    rigid[k] = rigid[k - 1]
+            positions = rigid.copy()
+            for j in range(self.ny):
+                q = int(np.argmax(np.abs(cq[j])))
+                positions[exp.valid[:, j], q] = exp.outputs[exp.valid[:, j], j]
+            rates = np.gradient(rigid, self.dt, axis=0) if n > 1 else np.zeros_like(rigid)
+            for i in np.flatnonzero(self.window_experiment == e):
+                k0 = self.window_start[i]
+                nodes[i, : self.nq] = positions[k0]
+                nodes[i, self.nq :] = rates[k0]
+                idx = np.minimum(np.arange(k0, k0 + self.m + 1), n - 1)
+                velocity[i] = rates[idx]
+        return nodes, velocity
+
+    # ------------------------------------------------------------------ substeps
+    def substep_plan(self, p: np.ndarray, smoothing: tuple[float, float]) -> dict:
+        """Fast and stiff substep counts and, per velocity state, the speed below which a
+        window needs the stiff count."""
+        options = self.problem.options
+        jac = lambda x: self._jac_x(x, p, ca.DM(smoothing))  # noqa: E731
+        vs = np.array(
+            [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.model.coordinates]
+        )
+        moving = np.concatenate([np.zeros(self.nq), 100.0 * vs])
+        a_rest = np.array(jac(np.zeros(self.nx)))
+        a_moving = np.array(jac(moving))
+        limit = RK4_STABILITY_LIMIT / options.substep_safety
+        radius_moving = float(np.max(np.abs(np.linalg.eigvals(a_moving))))
+        radius_rest = float(np.max(np.abs(np.linalg.eigvals(a_rest))))
+        fast = max(MIN_SUBSTEPS, math.ceil(radius_moving * self.dt / limit))
+        fast = min(fast, options.max_substeps)
+        stiff = min(max(fast, math.ceil(radius_rest * self.dt / limit)), options.max_substeps)
+        # Coulomb part of each velocity's own rate: lambda_j sech^2(v / v_s).
+        lam = np.abs(np.diag(a_rest)[self.nq :] - np.diag(a_moving)[self.nq :])
+        h_fast = self.dt / fast
+        threshold = np.zeros(self.nq)
+        for j in range(self.nq):
+            ratio = 0.5 * limit / max(lam[j] * h_fast, 1e-300)  # factor 0.5: margin
+            if ratio < 1:
+                threshold[j] = vs[j] * math.acosh(1 / math.sqrt(ratio))
+        return {"fast": fast, "stiff": stiff, "threshold": threshold}
+
+    def _needs_stiff(self, velocity: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+        """(W,) windows whose velocities (W, K, n_q) come near zero or change sign."""
+        check = threshold > 0
+        if not np.any(check):
+            return np.zeros(velocity.shape[0], dtype=bool)
+        v = velocity[:, :, check]
+        slow = np.any(np.abs(v) <= threshold[check], axis=(1, 2))
+        flips = np.any(np.abs(np.diff(np.sign(v), axis=1)) > 0, axis=(1, 2))
+        return slow | flips | ~np.all(np.isfinite(v), axis=(1, 2))
+
+    def _integrate(self, idx: np.ndarray, nodes, p, smoothing, n_sub):
+        """Integrate windows ``idx``: states (len, M, n_x) after each sample and their
+        sensitivities (len, M, n_x, n_d). Evaluated on numpy buffers (no DM copies)."""
+        count = len(idx)
+        padded = int(math.ceil(count / PAD) * PAD)
+        sel = np.concatenate([idx, np.full(padded - count, idx[-1])])
+        key = (n_sub, padded)
+        if key not in self._buffers:
+            fn = window_function(self.substep, n_sub, self.m, padded, self.threads)
+            buf, trigger = fn.buffer()
+            nd = self.nx + self.nf
+            # CasADi matrices are column-major: a (rows, cols) input is a C-order (cols, rows).
+            arrays = {
+                "x0": np.zeros((padded, self.nx)),
+                "u": np.zeros((padded * self.m, self.nu)),
+                "p": np.zeros(len(self.model.parameters)),
+                "s": np.zeros(2),
+                "h": np.zeros(1),
+                "xs": np.zeros((padded * self.m, self.nx)),
+                "ss": np.zeros((padded * self.m * nd, self.nx)),
+            }
+            for i, name in enumerate(("x0", "u", "p", "s", "h")):
+                buf.set_arg(i, memoryview(arrays[name]))
+            buf.set_res(0, memoryview(arrays["xs"]))
+            buf.set_res(1, memoryview(arrays["ss"]))
+            self._buffers[key] = (fn, buf, trigger, arrays)
+        _, buf, trigger, arrays = self._buffers[key]
+        arrays["x0"][:] = nodes[sel]
+        arrays["u"][:] = self.inputs[sel].reshape(padded * self.m, self.nu)
+        arrays["p"][:] = p
+        arrays["s"][:] = smoothing
+        arrays["h"][0] = self.dt / n_sub
+        trigger()
+        if buf.ret() != 0:
+            raise FloatingPointError("shooting window evaluation failed")
+        nd = self.nx + self.nf
+        xs = arrays["xs"].reshape(padded, self.m, self.nx)[:count].copy()
+        ss = arrays["ss"].reshape(padded, self.m, nd, self.nx)[:count].transpose(0, 1, 3, 2)
+        return xs, ss.copy()
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(
+        self,
+        nodes: np.ndarray,
+        theta: np.ndarray,
+        smoothing: tuple[float, float],
+        velocity_hint: np.ndarray | None = None,
+        plan: dict | None = None,
+    ) -> Evaluation:
+        """Residuals, Jacobians and window ends at (nodes, theta)."""
+        p = self.problem.parameters(theta)
+        plan = plan or self.substep_plan(p, smoothing)
+        w, m, nx = self.n_windows, self.m, self.nx
+        if velocity_hint is None:
+            velocity_hint = np.repeat(nodes[:, None, self.nq :], m + 1, axis=1)
+        stiff = self._needs_stiff(velocity_hint, plan["threshold"])
+        xs = np.empty((w, m, nx))
+        ss = np.empty((w, m, nx, nx + self.nf))
+        done = np.zeros(w, dtype=bool)
+        for attempt in range(2):
+            for flag, n_sub in ((False, plan["fast"]), (True, plan["stiff"])):
+                idx = np.flatnonzero((stiff == flag) & ~done)
+                if idx.size:
+                    xs[idx], ss[idx] = self._integrate(idx, nodes, p, smoothing, n_sub)
+            if plan["fast"] == plan["stiff"] or attempt == 1:
+                break
+            traj = np.concatenate([nodes[:, None, :], xs], axis=1)[:, :, self.nq :]
+            recheck = (~stiff) & self._needs_stiff(traj, plan["threshold"])
+            done = ~recheck
+            if not recheck.any():
+                break
+            stiff = stiff | recheck
+        states = np.concatenate([nodes[:, None, :], xs], axis=1)  # (W, M + 1, n_x)
+        eye = np.broadcast_to(
+            np.hstack([np.eye(nx), np.zeros((nx, self.nf))]), (w, 1, nx, nx + self.nf)
+        )
+        sens = np.concatenate([eye, ss[:, :-1]], axis=1)  # (W, M, n_x, n_d) at samples 0..M-1
+        y = np.einsum("jx,wkx->wkj", self.c, states[:, :m])
+        residual = self.weight * (y - self.measured)
+        jac = np.einsum("jx,wkxd->wkjd", self.c, sens) * self.weight[..., None]
+        p_free = p[list(self.problem.free)]
+        jac_theta = jac[..., nx:] * p_free
+        end = ss[:, -1]
+        return Evaluation(
+            residual=residual,
+            jac_node=jac[..., :nx],
+            jac_theta=jac_theta,
+            x_end=xs[:, -1],
+            a_end=end[:, :, :nx],
+            b_end=end[:, :, nx:] * p_free,
+            states=states,
+            n_substeps=(plan["fast"], plan["stiff"]),
+            n_stiff_windows=int(stiff.sum()),
+        )
+
+    def defects(self, ev: Evaluation, nodes: np.ndarray, links=None) -> np.ndarray:
+        """(W - 1, n_x) continuity defects x_end_i - node_{i+1}, scaled by the state scale;
+        zero between experiments (and wherever ``links`` is False)."""
+        links = self.linked if links is None else links
+        d = (ev.x_end[:-1] - nodes[1:]) / self.defect_scale
+        d[~links] = 0.0
+        return d
+
+    def simulate_outputs(
+        self, nodes0: np.ndarray, theta: np.ndarray, smoothing: tuple[float, float]
+    ) -> list[np.ndarray]:
+        """Outputs (N, n_y) of each experiment simulated from its initial state (single
+        shooting), for plots and checks."""
+        from hframe_id.simulation.open_loop import simulate
+
+        p = self.problem.parameters(theta)
+        plan = self.substep_plan(p, smoothing)
+        result = []
+        for e, exp in enumerate(self.problem.experiments):
+            states = simulate(
+                self.model,
+                p,
+                exp.inputs,
+                self.dt,
+                x0=nodes0[e],
+                n_substeps=plan["stiff"],
+                smoothing=smoothing,
+            )[:-1]
+            result.append(states @ self.c.T)
+        return result

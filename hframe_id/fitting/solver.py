@@ -1,0 +1,514 @@
+"""Gauss-Newton (Levenberg-Marquardt) on the lifted multiple-shooting problem.
+
+Two kinds of stage, on the same evaluation (``MultipleShooting.evaluate``):
+
+- ``windows``: every window is an independent short fit sharing the parameters (continuity
+  dropped). The normal equations are block-arrow shaped; the node blocks (n_x x n_x each)
+  are eliminated by a Schur complement, leaving a solve the size of the free parameters.
+- ``continuity``: the continuity conditions x_end(node_i, theta) = node_{i+1} are linearised
+  and condensed (Bock): node steps become affine in each experiment's first node step and
+  the parameter step, ds_{i+1} = d_i + A_i ds_i + B_i dtheta, so each iteration solves a
+  dense system of n_x * experiments + n_free unknowns. The nonlinear defects close as the
+  iteration converges; an l1 merit function with an adaptive penalty globalises the step.
+
+Parameters stay within their bounds by projection: a parameter at a bound whose step points
+outward is held for that iteration.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hframe_id.fitting.options import FitProgress
+from hframe_id.fitting.shooting import Evaluation, MultipleShooting
+
+#: Trust region on the log-parameters (2-norm): start, largest, smallest before giving up.
+MAX_RADIUS = 4.0
+MIN_RADIUS = 1e-9
+#: Marquardt damping of the node blocks (relative to their diagonal): keeps the solve
+#: regular where a window's data do not determine its node state (e.g. speed at rest).
+NODE_DAMPING = 1e-6
+MAX_NODE_DAMPING = 1e8
+#: Proximal weight on node velocity steps (continuity stages), see ``set_smoothing``.
+PROX_WEIGHT = 1.0
+#: Watchdog of the continuity stages.
+WATCHDOG_FACTOR = 10.0
+WATCHDOG_PATIENCE = 4
+#: Continuity stages accept their first steps unconditionally: they close the defects left
+#: by the previous stage, which raises the cost (and the merit) before it falls.
+FREE_STEPS = 2
+#: Floor of the Marquardt scaling, relative to the largest diagonal entry of the block.
+DIAG_FLOOR = 1e-9
+
+
+@dataclass
+class SolverState:
+    """Iterate of the lifted problem."""
+
+    nodes: np.ndarray  # (W, n_x)
+    theta: np.ndarray  # (n_f,) log-parameters of the free parameters
+    active: np.ndarray  # (n_f,) bool: parameter is being fitted (False: held at prior)
+    evaluation: Evaluation | None = None
+    velocity_hint: np.ndarray | None = None
+
+
+@dataclass
+class StageReport:
+    name: str
+    smoothing: tuple[float, float]
+    iterations: int
+    converged: bool
+    message: str
+    cost: float
+    max_defect: float
+    wall_time_s: float
+    at_bound: list[int] = field(default_factory=list)
+    substeps: tuple[int, int] = (0, 0)
+    radius: float = math.nan
+
+
+def _damped(h: np.ndarray, lam: float) -> np.ndarray:
+    """H + lam * diag(max(diag H, floor)) for a stack of square matrices (..., n, n)."""
+    diag = np.diagonal(h, axis1=-2, axis2=-1)
+    floor = DIAG_FLOOR * np.max(diag, axis=-1, keepdims=True) + 1e-300
+    d = np.maximum(diag, floor)
+    out = h.copy()
+    idx = np.arange(h.shape[-1])
+    out[..., idx, idx] += lam * d
+    return out
+
+
+def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.ndarray, bool]:
+    """argmin g.d + d.H.d / 2 subject to |d|_2 <= radius (More-Sorensen, H = V E V^T >= 0).
+
+    Returns the step and whether it is the full Gauss-Newton step (region inactive).
+    """
+    if g.size == 0:
+        return np.zeros(0), True
+    e, v = np.linalg.eigh(h)
+    e = np.maximum(e, 1e-14 * max(float(e[-1]), 1e-300))
+    gv = v.T @ g
+
+    def step(mu: float) -> np.ndarray:
+        return -v @ (gv / (e + mu))
+
+    full = step(0.0)
+    if np.linalg.norm(full) <= radius:
+        return full, True
+    # |step(mu)| falls with mu and is <= |g| / mu: bisect log(mu) in (|g| / r * 1e-14, |g| / r].
+    hi = float(np.linalg.norm(g)) / radius
+    lo = hi * 1e-14
+    for _ in range(200):
+        mid = math.sqrt(lo * hi)
+        if np.linalg.norm(step(mid)) > radius:
+            lo = mid
+        else:
+            hi = mid
+        if hi <= lo * (1 + 1e-6):
+            break
+    return step(hi), False
+
+
+class GaussNewton:
+    """Iterates the stages of the lifted problem."""
+
+    def __init__(self, shooting: MultipleShooting, progress=None):
+        self.ms = shooting
+        self.problem = shooting.problem
+        self.progress = progress
+        self.evaluations = 0
+        self.links = shooting.linked.copy()
+        self.prox = np.zeros(shooting.nx)
+        self.node_damping = NODE_DAMPING
+
+    def set_smoothing(self, smoothing, proximal: bool = True):
+        """Proximal weight on node velocity steps: a step of one smoothing velocity costs as
+        much as one noise-sized residual. Near rest the dynamics change on that scale (the
+        Coulomb law turns within a few v_s), and the speed at rest is nearly collinear with
+        the position, so without it Gauss-Newton takes long, useless velocity steps."""
+        vs = np.array(
+            [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.ms.model.coordinates]
+        )
+        weight = PROX_WEIGHT if proximal else 0.0
+        self.prox = np.concatenate([np.zeros(self.ms.nq), weight / vs**2])
+
+    def _evaluate(self, state: SolverState, nodes, theta, smoothing) -> Evaluation:
+        self.evaluations += 1
+        return self.ms.evaluate(nodes, theta, smoothing, velocity_hint=state.velocity_hint)
+
+    # ------------------------------------------------------------------ continuity stage
+    def _linearize(self, ev: Evaluation, nodes, free: np.ndarray):
+        """Condensed Gauss-Newton model over chains of linked windows (segments).
+
+        Returns the reduced normal equations in the free log-parameters (every segment's
+        first-node step eliminated) and ``complete(dtheta) -> (dnodes, r.Jd, |Jd|^2)``.
+        """
+        links = self.links
+        w, m, ny, nx = ev.jac_node.shape
+        nf = int(free.sum())
+        segment = np.concatenate([[0], np.cumsum(~links)])
+        n_seg = int(segment[-1]) + 1
+        r_all = ev.residual.reshape(w, m * ny)
+        js_all = ev.jac_node.reshape(w, m * ny, nx)
+        jp_all = ev.jac_theta.reshape(w, m * ny, -1)[:, :, free]
+        b_all = ev.b_end[:, :, free]
+        defect = ev.x_end[:-1] - nodes[1:]
+        offsets = np.zeros((w, nx))
+        gains = np.zeros((w, nx, nx + nf))
+        a = np.zeros(nx)
+        gmat = np.hstack([np.eye(nx), np.zeros((nx, nf))])
+        for i in range(w):
+            if i > 0 and not links[i - 1]:
+                a = np.zeros(nx)
+                gmat = np.hstack([np.eye(nx), np.zeros((nx, nf))])
+            offsets[i] = a
+            gains[i] = gmat
+            if i + 1 < w and links[i]:
+                a = ev.a_end[i] @ a + defect[i]
+                gmat = ev.a_end[i] @ gmat
+                gmat[:, nx:] += b_all[i]
+        jc = np.einsum("wri,wij->wrj", js_all, gains)
+        jc[:, :, nx:] += jp_all
+        rc = r_all + np.einsum("wri,wi->wr", js_all, offsets)
+        # Per segment: node block, coupling to theta; theta block summed.
+        he = np.einsum("wri,wrj->wij", jc, jc)
+        ge = np.einsum("wri,wr->wi", jc, rc)
+        h_ss = np.zeros((n_seg, nx, nx))
+        h_sp = np.zeros((n_seg, nx, nf))
+        g_s = np.zeros((n_seg, nx))
+        np.add.at(h_ss, segment, he[:, :nx, :nx])
+        np.add.at(h_sp, segment, he[:, :nx, nx:])
+        np.add.at(g_s, segment, ge[:, :nx])
+        h_pp = he[:, nx:, nx:].sum(axis=0)
+        g_p = ge[:, nx:].sum(axis=0)
+        # Eliminate the segments' first-node steps (block diagonal) by a Schur complement.
+        h_ss_d = _damped(h_ss, self.node_damping) + np.diag(self.prox)
+        k = np.linalg.solve(h_ss_d, np.concatenate([h_sp, g_s[:, :, None]], axis=2))
+        k_sp, k_g = k[:, :, :-1], k[:, :, -1]
+        h_red = h_pp - np.einsum("sij,sik->jk", h_sp, k_sp)
+        g_red = g_p - np.einsum("sij,si->j", h_sp, k_g)
+
+        def complete(dtheta_free):
+            # First-node steps for this parameter step, then the linearised continuity.
+            ds0 = -(k_g + np.einsum("sij,j->si", k_sp, dtheta_free))
+            ze = np.concatenate([ds0[segment], np.broadcast_to(dtheta_free, (w, nf))], axis=1)
+            dnodes = offsets + np.einsum("wij,wj->wi", gains, ze)
+            jd = np.einsum("wri,wi->wr", js_all, dnodes) + np.einsum(
+                "wri,i->wr", jp_all, dtheta_free
+            )
+            # Change of the cost along the step to second order; the defects close (linearly).
+            return dnodes, float(np.sum(r_all * jd) + 0.5 * np.sum(jd * jd))
+
+        return h_red, g_red, complete
+
+    def condensed_jacobian(self, ev: Evaluation, nodes: np.ndarray, free: np.ndarray):
+        """The single-shooting Jacobian at a continuous solution, from the window
+        sensitivities chained along each experiment.
+
+        Returns (J, r, blocks): J (n_valid, n_x * experiments + n_free) with each
+        experiment's initial-state columns first, r the weighted residuals, and blocks
+        (label "experiment:channel", row indices in time order) for the HAC estimator.
+        """
+        ms = self.ms
+        w, m, ny, nx = ev.jac_node.shape
+        nf = int(free.sum())
+        n_exp = len(self.problem.experiments)
+        jp_all = ev.jac_theta[..., free]
+        b_all = ev.b_end[:, :, free]
+        gains = np.zeros((w, nx, nx + nf))
+        gmat = np.hstack([np.eye(nx), np.zeros((nx, nf))])
+        for i in range(w):
+            if i > 0 and not ms.linked[i - 1]:
+                gmat = np.hstack([np.eye(nx), np.zeros((nx, nf))])
+            gains[i] = gmat
+            if i + 1 < w and ms.linked[i]:
+                gmat = ev.a_end[i] @ gmat
+                gmat[:, nx:] += b_all[i]
+        jc = np.einsum("wkji,wil->wkjl", ev.jac_node, gains)
+        jc[..., nx:] += jp_all
+        full = np.zeros((w, m, ny, nx * n_exp + nf))
+        for e in range(n_exp):
+            idx = ms.window_experiment == e
+            full[idx, :, :, e * nx : (e + 1) * nx] = jc[idx, :, :, :nx]
+        full[..., nx * n_exp :] = jc[..., nx:]
+        valid = ms.weight > 0
+        order = np.arange(w * m * ny).reshape(w, m, ny)
+        rows = order[valid]
+        position = np.full(w * m * ny, -1)
+        position[rows] = np.arange(rows.size)
+        blocks = []
+        names = self.problem.output_names
+        for e, exp in enumerate(self.problem.experiments):
+            idx = np.flatnonzero(ms.window_experiment == e)
+            for j, name in enumerate(names):
+                sel = order[idx, :, j].ravel()
+                sel = position[sel]
+                blocks.append((f"{exp.name}:{name}", sel[sel >= 0]))
+        return full[valid], ev.residual[valid], blocks
+
+    def _linearize_penalty(self, ev: Evaluation, nodes, free: np.ndarray, weight: float):
+        """Gauss-Newton model with continuity as weighted residuals (defects in noise units).
+
+        The node steps are coupled only to their neighbours, so the normal equations are
+        block tridiagonal in the nodes (plus the parameter arrow): a block Thomas sweep
+        eliminates the nodes, leaving the reduced system in the free log-parameters.
+        Returns it and ``complete(dtheta) -> (dnodes, model change)``.
+        """
+        ms = self.ms
+        links = self.links
+        w, m, ny, nx = ev.jac_node.shape
+        scale = ms.defect_scale
+        r = ev.residual.reshape(w, m * ny)
+        js = ev.jac_node.reshape(w, m * ny, nx)
+        jp = ev.jac_theta.reshape(w, m * ny, -1)[:, :, free]
+        a = ev.a_end / scale[None, :, None]  # D^-1 A
+        b = ev.b_end[:, :, free] / scale[None, :, None]  # D^-1 B
+        d = np.zeros((w, nx))
+        d[:-1] = (ev.x_end[:-1] - nodes[1:]) / scale
+        link = np.zeros(w, dtype=bool)
+        link[:-1] = links
+        d[~link] = 0.0
+        mu = weight * link.astype(float)
+        inv = 1.0 / scale
+        # Continuity residual of link i: c_i = d_i + a_i ds_i + b_i dtheta - inv * ds_{i+1}.
+        diag = np.einsum("wri,wrj->wij", js, js) + mu[:, None, None] * np.einsum(
+            "wki,wkj->wij", a, a
+        )
+        diag[1:] += (mu[:-1, None, None] * np.diag(inv**2)[None]).astype(float)
+        upper = -mu[:, None, None] * a.transpose(0, 2, 1) * inv[None, None, :]  # (i, i+1)
+        cross = np.einsum("wri,wrj->wij", js, jp) + mu[:, None, None] * np.einsum(
+            "wki,wkj->wij", a, b
+        )
+        cross[1:] -= mu[:-1, None, None] * inv[None, :, None] * b[:-1]
+        grad = np.einsum("wri,wr->wi", js, r) + mu[:, None] * np.einsum("wki,wk->wi", a, d)
+        grad[1:] -= mu[:-1, None] * inv[None, :] * d[:-1]
+        h_pp = np.einsum("wri,wrj->ij", jp, jp) + np.einsum("w,wki,wkj->ij", mu, b, b)
+        g_p = np.einsum("wri,wr->i", jp, r) + np.einsum("w,wki,wk->i", mu, b, d)
+        diag_d = _damped(diag, self.node_damping) + np.diag(self.prox)[None]
+        # Block Thomas: solve H_ss X = [cross, grad] for all right-hand sides at once.
+        rhs = np.concatenate([cross, grad[:, :, None]], axis=2)
+        c_prime = np.empty((w, nx, nx))
+        r_prime = np.empty_like(rhs)
+        for i in range(w):
+            denom = diag_d[i]
+            rr = rhs[i]
+            if i > 0:
+                lower = upper[i - 1].T
+                denom = denom - lower @ c_prime[i - 1]
+                rr = rr - lower @ r_prime[i - 1]
+            lu = np.linalg.solve(denom, np.hstack([upper[i], rr]))
+            c_prime[i] = lu[:, :nx]
+            r_prime[i] = lu[:, nx:]
+        x = np.empty_like(rhs)
+        x[-1] = r_prime[-1]
+        for i in range(w - 2, -1, -1):
+            x[i] = r_prime[i] - c_prime[i] @ x[i + 1]
+        x_p, x_g = x[:, :, :-1], x[:, :, -1]
+        h_red = h_pp - np.einsum("wij,wik->jk", cross, x_p)
+        g_red = g_p - np.einsum("wij,wi->j", cross, x_g)
+
+        def complete(dtheta_free):
+            dnodes = -(x_g + np.einsum("wij,j->wi", x_p, dtheta_free))
+            jd = np.einsum("wri,wi->wr", js, dnodes) + np.einsum("wri,i->wr", jp, dtheta_free)
+            cd = np.einsum("wki,wi->wk", a, dnodes) + np.einsum("wki,i->wk", b, dtheta_free)
+            cd[:-1] -= inv[None, :] * dnodes[1:]
+            # Change of cost + weight/2 |d|^2 along the step, to second order.
+            change = float(np.sum(r * jd) + 0.5 * np.sum(jd * jd))
+            change += float(np.sum(mu[:, None] * (d * cd + 0.5 * cd * cd)))
+            return dnodes, change
+
+        return h_red, g_red, complete
+
+    # ------------------------------------------------------------------ driver
+    def run(
+        self,
+        state: SolverState,
+        stage: str,
+        smoothing: tuple[float, float],
+        max_iterations: int,
+        step_tol: float,
+        defect_tol: float,
+        cost_rtol: float = 0.0,
+        segment_windows: int | None = None,
+        radius: float = 0.5,
+        penalty: float | None = None,
+    ) -> StageReport:
+        """Iterate one stage until converged; updates ``state`` in place.
+
+        ``stage`` is ``"windows"`` (chains cut every ``segment_windows`` windows; monotone
+        trust-region Gauss-Newton) or ``"continuity"`` (every window of an experiment linked;
+        nearly full Gauss-Newton steps under a watchdog, see the module docstring).
+
+        Converged: the last step was a full Gauss-Newton step (trust region inactive) that
+        changed no free parameter by more than ``step_tol`` (relative), and the continuity
+        defects are below ``defect_tol`` (noise units). Intermediate stages may stop once
+        an iteration lowers the cost by less than ``cost_rtol`` (relative).
+        """
+        start = time.perf_counter()
+        ms = self.ms
+        self.node_damping = NODE_DAMPING
+        windows = stage == "windows"
+        self.set_smoothing(smoothing, proximal=True)
+        self.links = ms.linked.copy()
+        if windows:
+            cut = segment_windows or 1
+            self.links &= (ms.window_index_in_experiment[1:] % cut) != 0
+        lo, hi = self.problem.log_lower, self.problem.log_upper
+        ev = self._evaluate(state, state.nodes, state.theta, smoothing)
+        state.evaluation = ev
+        state.velocity_hint = ev.states[:, :, ms.nq :]
+        converged = False
+        message = f"not converged in {max_iterations} iterations"
+        iterations = 0
+
+        def merit(ev_, nodes_):
+            weight = 1.0 if penalty is None else penalty
+            defects = ms.defects(ev_, nodes_, self.links)
+            return ev_.cost + 0.5 * weight * float(np.sum(defects**2))
+
+        best = (merit(ev, state.nodes), state.nodes, state.theta, ev)
+        since_best = 0
+        for iterations in range(1, max_iterations + 1):
+            accepted = False
+            full_step = False
+            step = 0.0
+            previous_cost = ev.cost
+            current = merit(ev, state.nodes)
+            free = state.active.copy()
+            index = np.flatnonzero(free)
+            damping_used = None
+            while radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
+                if damping_used != self.node_damping:
+                    if penalty is None:
+                        h_red, g_red, complete = self._linearize(ev, state.nodes, free)
+                    else:
+                        h_red, g_red, complete = self._linearize_penalty(
+                            ev, state.nodes, free, penalty
+                        )
+                    damping_used = self.node_damping
+                # Hold parameters at a bound whose step points outward, then clip.
+                sub = np.ones(len(index), dtype=bool)
+                for _ in range(len(index) + 1):
+                    d_sub, full_step = _trust_region_step(
+                        h_red[np.ix_(sub, sub)], g_red[sub], radius
+                    )
+                    d = np.zeros(len(index))
+                    d[sub] = d_sub
+                    theta_f = state.theta[index]
+                    out = sub & (
+                        ((theta_f <= lo[index] + 1e-12) & (d < 0))
+                        | ((theta_f >= hi[index] - 1e-12) & (d > 0))
+                    )
+                    if not out.any():
+                        break
+                    sub &= ~out
+                d = np.clip(theta_f + d, lo[index], hi[index]) - theta_f
+                dnodes, change = complete(d)
+                dtheta = np.zeros_like(state.theta)
+                dtheta[index] = d
+                theta_new = state.theta + dtheta
+                nodes_new = state.nodes + dnodes
+                if penalty is None:
+                    # Cost along the step, defects linearly closed (exact continuity).
+                    predicted = current - (ev.cost + change)
+                else:
+                    predicted = -change
+                trial = self._evaluate(state, nodes_new, theta_new, smoothing)
+                new = merit(trial, nodes_new)
+                ratio = (current - new) / predicted if predicted > 0 else -1.0
+                length = float(np.linalg.norm(d))
+                if not np.isfinite(new) or ratio < 0.25:
+                    radius = 0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * radius
+                    self.node_damping *= 10.0
+                elif ratio > 0.75:
+                    self.node_damping = max(NODE_DAMPING, self.node_damping / 10.0)
+                    if length >= 0.9 * radius:
+                        radius = min(2 * radius, MAX_RADIUS)
+                if windows or penalty is not None:
+                    ok = np.isfinite(new) and ratio > 1e-4
+                elif iterations <= FREE_STEPS:
+                    ok = bool(np.isfinite(new))
+                else:
+                    ok = np.isfinite(new) and new < WATCHDOG_FACTOR * best[0]
+                if ok:
+                    accepted = True
+                    step = float(np.max(np.abs(d), initial=0.0))
+                    break
+                full_step = False
+            if accepted:
+                state.nodes, state.theta, ev = nodes_new, theta_new, trial
+                state.evaluation = ev
+                state.velocity_hint = ev.states[:, :, ms.nq :]
+                value = merit(ev, state.nodes)
+                if not windows and penalty is None and iterations <= FREE_STEPS:
+                    best = (value, state.nodes, state.theta, ev)
+                    since_best = 0
+                elif value < best[0]:
+                    best = (value, state.nodes, state.theta, ev)
+                    since_best = 0
+                else:
+                    since_best += 1
+                if since_best >= WATCHDOG_PATIENCE:
+                    # The watchdog: back to the best iterate, with a smaller trust region.
+                    _, state.nodes, state.theta, ev = best
+                    state.evaluation = ev
+                    state.velocity_hint = ev.states[:, :, ms.nq :]
+                    radius = 0.1 * max(step, MIN_RADIUS)
+                    since_best = 0
+                    full_step = False
+            max_defect = float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0))
+            if self.progress is not None:
+                self.progress(
+                    FitProgress(
+                        stage=f"{stage} v_s={smoothing[0]:g},{smoothing[1]:g}",
+                        iteration=iterations,
+                        cost=ev.cost,
+                        step=step,
+                        defect=max_defect,
+                        message=f"radius={radius:.1e} substeps={ev.n_substeps} "
+                        f"stiff_windows={ev.n_stiff_windows}",
+                    )
+                )
+            if not accepted:
+                converged = abs(predicted) <= 1e-10 * max(ev.cost, 1.0) and (
+                    max_defect <= defect_tol
+                )
+                message = (
+                    "converged (no further decrease possible)"
+                    if converged
+                    else "stalled: no step decreases the cost"
+                )
+                break
+            if cost_rtol > 0 and 0 <= previous_cost - ev.cost <= cost_rtol * ev.cost:
+                converged = True
+                message = f"cost decrease below {cost_rtol:g} (relative)"
+                break
+            if step <= step_tol and full_step and max_defect <= defect_tol:
+                converged = True
+                message = f"converged: parameter step {step:.1e} <= {step_tol:.0e}"
+                break
+        if best[0] < merit(ev, state.nodes) and not converged:
+            _, state.nodes, state.theta, ev = best
+            state.evaluation = ev
+        at_bound = [
+            int(i)
+            for i in np.flatnonzero(state.active)
+            if state.theta[i] <= lo[i] + 1e-9 or state.theta[i] >= hi[i] - 1e-9
+        ]
+        return StageReport(
+            name=stage,
+            smoothing=smoothing,
+            iterations=iterations,
+            converged=converged,
+            message=message,
+            cost=ev.cost,
+            max_defect=float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0)),
+            wall_time_s=time.perf_counter() - start,
+            at_bound=at_bound,
+            substeps=ev.n_substeps,
+            radius=radius,
+        )
