@@ -28,7 +28,7 @@ from hframe_id.control.trajectory import (
 )
 from hframe_id.errors import ModelError, OptionError
 from hframe_id.models import Model
-from hframe_id.simulation.compiled import maybe_compile
+from hframe_id.simulation.compiled import evaluate, maybe_compile
 from hframe_id.simulation.friction import FrictionOptions, dynamics_function
 from hframe_id.simulation.integrators import rk4_expression
 from hframe_id.simulation.open_loop import default_substeps
@@ -107,8 +107,6 @@ def closed_loop_horizon(
     """H(z0, R, p, s, gains, limits) -> (Z, U) over ``n_samples`` samples (one call)."""
     step = closed_loop_step(model, n_substeps, dt, friction_model, delay_samples)
     horizon = step.mapaccum("closed_loop", n_samples)
-    if not compiled:
-        return horizon
     symbols = [
         ca.MX.sym(name, step.size1_in(i), n_samples if name == "r" else 1)
         for i, name in enumerate(step.name_in())
@@ -120,7 +118,7 @@ def closed_loop_horizon(
         step.name_in(),
         ["z_all", "u_all"],
     )
-    return maybe_compile(flat, True)
+    return maybe_compile(flat, compiled)
 
 
 _FIXED_COORDINATES = ("x", "y", "phi1", "phi2")
@@ -256,15 +254,18 @@ def simulate_closed_loop(
         bool(compiled),
         controller.delay_samples,
     )
-    z, u = horizon(
-        z0,
-        reference_phi[:-1].T,
-        p,
-        ca.DM(friction.shape(model)),
-        ca.DM(controller.gain_vector()),
-        ca.DM([controller.u_min_v, controller.u_max_v]),
+    z, u = evaluate(
+        horizon,
+        [
+            z0,
+            reference_phi[:-1],
+            p,
+            np.asarray(friction.shape(model), dtype=float),
+            np.asarray(controller.gain_vector(), dtype=float),
+            np.array([controller.u_min_v, controller.u_max_v]),
+        ],
     )
-    z = np.vstack([z0, np.array(z).T])
+    z = np.vstack([z0, z])
     states = z[:, : model.n_states]
     index = {name: model.index("state", name) for name in ("x", "y", "phi1", "phi2")}
     return ClosedLoopResult(
@@ -274,7 +275,7 @@ def simulate_closed_loop(
         states=states,
         xy_m=states[:, [index["x"], index["y"]]],
         phi_rad=states[:, [index["phi1"], index["phi2"]]],
-        voltages_v=np.array(u).T,
+        voltages_v=u,
         integral_v=z[:, model.n_states + 2 : model.n_states + 4],
         trajectory=trajectory,
         controller=controller,

@@ -105,7 +105,14 @@ def stable_substeps(
     ``safety`` 1.5 keeps the fast friction mode well damped (not just bounded); ``minimum`` 4
     keeps the oscillatory belt modes (|lambda| ~ 330 1/s) accurate to ~1e-8 per sample.
     """
-    s = s or model.options.smoothing
-    radius = spectral_radius_at_rest(model, np.asarray(p, dtype=float), s)
+    s = tuple(float(v) for v in (s or model.options.smoothing))
+    p = np.ascontiguousarray(p, dtype=float)
+    radius = _cached_radius(model, p.tobytes(), s)
     needed = math.ceil(radius * dt * safety / RK4_STABILITY_LIMIT)
     return int(min(max(needed, minimum), cap))
+
+
+@lru_cache(maxsize=256)
+def _cached_radius(model: Model, p_bytes: bytes, s: tuple[float, float]) -> float:
+    """``spectral_radius_at_rest`` memoized (simulators ask again for every run)."""
+    return spectral_radius_at_rest(model, np.frombuffer(p_bytes, dtype=float), s)

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.models import Model
-from hframe_id.simulation.compiled import maybe_compile
+from hframe_id.simulation.compiled import evaluate, maybe_compile
 from hframe_id.simulation.friction import (
     FrictionOptions,
     dynamics_function,
@@ -38,15 +38,13 @@ def _trajectory_function(
     """X = F(x0, U, p, s): all states after each of n_samples held-input samples."""
     step = rk4_function(dynamics_function(model, FrictionOptions(friction_model)), n_substeps, dt)
     horizon = step.mapaccum("trajectory", n_samples)
-    if compiled:
-        x0, u = ca.MX.sym("x0", model.n_states), ca.MX.sym("u", model.n_inputs, n_samples)
-        p, s = ca.MX.sym("p", step.size1_in(2)), ca.MX.sym("s", 2)
-        flat = ca.Function(
-            f"open_loop_{model.variant.replace('-', '_')}",
-            [x0, u, p, s], [horizon(x0, u, p, s)], ["x0", "u", "p", "s"], ["x"],
-        )  # fmt: skip
-        return maybe_compile(flat, True)
-    return horizon
+    x0, u = ca.MX.sym("x0", model.n_states), ca.MX.sym("u", model.n_inputs, n_samples)
+    p, s = ca.MX.sym("p", step.size1_in(2)), ca.MX.sym("s", 2)
+    flat = ca.Function(
+        f"open_loop_{model.variant.replace('-', '_')}_{n_samples}",
+        [x0, u, p, s], [horizon(x0, u, p, s)], ["x0", "u", "p", "s"], ["x"],
+    )  # fmt: skip
+    return maybe_compile(flat, compiled)
 
 
 def default_substeps(
@@ -108,7 +106,7 @@ def simulate(
     trajectory = _trajectory_function(
         model, int(n_substeps), float(dt), inputs.shape[0], friction.model, bool(compiled)
     )
-    states = np.array(trajectory(x0, inputs.T, p, ca.DM(s))).T
+    (states,) = evaluate(trajectory, [x0, inputs, p, np.asarray(s, dtype=float)])
     return np.vstack([x0, states])
 
 
