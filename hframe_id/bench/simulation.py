@@ -29,6 +29,7 @@ from hframe_id.control.pid import ControllerOptions, ResetWindupPID
 from hframe_id.control.trajectory import motor_angles, square
 from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
+from hframe_id.simulation.compiled import evaluate
 from hframe_id.simulation.friction import FrictionOptions
 from hframe_id.simulation.integrators import rk4_step, stable_substeps
 from hframe_id.simulation.open_loop import _trajectory_function, simulate
@@ -91,14 +92,14 @@ def closed_loop_lines(repeats: int = 21) -> list[str]:
     simulate_closed_loop(model, p, trajectory, controller, compiled=True)
     first = time.perf_counter() - start
     horizon = closed_loop_horizon(model, n, DT, n_samples, "smooth", True)
-    args = (
+    args = [
         np.zeros(model.n_states + 4),
-        motor_angles(trajectory.position(trajectory.sample_times(DT)[:-1]), params.values["r"]).T,
+        motor_angles(trajectory.position(trajectory.sample_times(DT)[:-1]), params.values["r"]),
         p,
-        ca.DM(model.options.smoothing),
-        ca.DM(controller.gain_vector()),
-        ca.DM([-10.0, 10.0]),
-    )
+        np.array(model.options.smoothing),
+        np.array(controller.gain_vector()),
+        np.array([-10.0, 10.0]),
+    ]
     base = {
         "python loop": median_time(
             lambda: _python_closed_loop(model, p, trajectory, controller, n), repeats=3
@@ -107,7 +108,7 @@ def closed_loop_lines(repeats: int = 21) -> list[str]:
             lambda: _scipy_closed_loop(model, p, trajectory, controller), repeats=1, warmup=0
         ),
     }
-    native = median_time(lambda: horizon(*args), repeats=repeats)
+    native = median_time(lambda: evaluate(horizon, args), repeats=repeats)
     full = median_time(
         lambda: simulate_closed_loop(model, p, trajectory, controller, compiled=True),
         repeats=repeats,
@@ -172,7 +173,10 @@ def open_loop_lines(repeats: int = 21) -> list[str]:
         "python loop": median_time(python_loop, repeats=3),
         "scipy": median_time(scipy_run, repeats=1, warmup=0),
     }
-    native = median_time(lambda: horizon(x0, inputs.T, p, s), repeats=repeats)
+    native = median_time(
+        lambda: evaluate(horizon, [x0, inputs, p, np.array(model.options.smoothing)]),
+        repeats=repeats,
+    )
     full = median_time(lambda: simulate(model, p, inputs, DT, compiled=True), repeats=repeats)
     vm = median_time(lambda: simulate(model, p, inputs, DT), repeats=5)
     return [

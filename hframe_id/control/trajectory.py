@@ -31,8 +31,9 @@ SQUARE_F_A = 0.2
 
 #: Leg order of the test square: +x, +y, -x, -y (counter-clockwise from the origin). Legs 1 and
 #: 3 move the bridge (x) and overshoot; legs 2 and 4 move the cart (y) (section 5.4.1: "overshoots
-#: when changing from a x-motion to a y-motion"; Fig. 5.11 shows y errors on leg 1). With this
-#: direction the cart stops short of the leg-2 corner, the undershoot of Table 5.1.
+#: when changing from a x-motion to a y-motion"; Fig. 5.11 shows y errors on leg 1). The cart
+#: stops short of the leg-2 corner (Table 5.1's undershoot) in either direction; the
+#: counter-clockwise offsets of legs 3 and 4 are the closer ones to Table 5.1 (docs/control.md).
 SQUARE_DIRECTIONS: tuple[tuple[float, float], ...] = ((1, 0), (0, 1), (-1, 0), (0, -1))
 
 
