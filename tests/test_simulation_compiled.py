@@ -33,6 +33,14 @@ def test_inline_tanh_is_accurate_to_a_few_ulp():
     assert out[2] == 1.0 and out[3] == -1.0 and np.isnan(out[4]) and out[5] == 1e-310
 
 
+def test_native_code_leaves_subnormals_alone():
+    # -ffast-math would link crtfastmath.o and set flush-to-zero for the whole process.
+    x = ca.SX.sym("x")
+    f = compile_function(ca.Function("halve", [x], [x / 2]))
+    assert float(f(4e-308)) == 2e-308
+    assert np.float64(5e-324) * 1.0 == 5e-324 and np.float64(1e-308) / 4 > 0
+
+
 def test_evaluate_checks_sizes():
     x = ca.SX.sym("x", 3)
     f = ca.Function("f", [x], [2 * x])
