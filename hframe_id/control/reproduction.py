@@ -352,11 +352,9 @@ def _span(values: list[float], scale: float = 1.0, fmt: str = "{:.0f}") -> str:
     if not finite:
         return "n/a"
     low, high = min(finite), max(finite)
-    return (
-        fmt.format(low)
-        if fmt.format(low) == fmt.format(high)
-        else (f"{fmt.format(low)}-{fmt.format(high)}")
-    )
+    if fmt.format(low) == fmt.format(high):
+        return fmt.format(low)
+    return f"{fmt.format(low)} to {fmt.format(high)}"
 
 
 def _change(rep: Reproduction, case: str, labels: list[str]) -> list[float]:
