@@ -96,7 +96,7 @@ class FitOptions:
     first_stage: bool = True
     max_iterations: int = 60
     step_tol: float = 1e-7
-    defect_tol: float = 1e-3
+    defect_tol: float = 1e-2
     identifiability_threshold: float = 0.1
     uncertainty: str = "hac"
     confidence: float = 0.95

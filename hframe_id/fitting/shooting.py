@@ -70,6 +70,9 @@ class MultipleShooting:
         self.ny = len(self.model.outputs)
         self.nf = len(problem.free)
         self.c = output_matrix(self.model)
+        # Outputs are coordinates: y_j = x[index_j] (faster than multiplying by C).
+        unit_rows = np.all((self.c == 0) | (self.c == 1), axis=1) & (self.c.sum(axis=1) == 1)
+        self._output_index = np.argmax(self.c, axis=1) if unit_rows.all() else None
         self.threads = problem.options.threads
         m = self.m
         exp_of, start, length = [], [], []
@@ -119,9 +122,9 @@ class MultipleShooting:
             [ca.jacobian(self.model.dynamics(x, ca.DM.zeros(self.nu), p, s), x)],
         )
 
-    def subset(self, windows: np.ndarray) -> MultipleShooting:
-        """The same transcription restricted to some windows, none of them linked (for a
-        cheap first stage of independent windows)."""
+    def subset(self, windows: np.ndarray, linked: bool = True) -> MultipleShooting:
+        """The same transcription restricted to some windows (consecutive ones linked, or
+        none if ``linked`` is False)."""
         view = object.__new__(MultipleShooting)
         view.__dict__.update(self.__dict__)
         windows = np.asarray(windows)
@@ -136,9 +139,36 @@ class MultipleShooting:
         ):
             setattr(view, name, getattr(self, name)[windows])
         view.n_windows = len(windows)
-        view.linked = np.zeros(len(windows) - 1, dtype=bool)
+        consecutive = (np.diff(windows) == 1) & (
+            self.window_experiment[windows[:-1]] == self.window_experiment[windows[1:]]
+        )
+        view.linked = consecutive if linked else np.zeros(len(windows) - 1, dtype=bool)
+        view.first_window = np.flatnonzero(np.r_[True, ~view.linked])
         view._buffers = {}
         return view
+
+    def moving_windows(self, velocity: np.ndarray, smoothing, margin: int = 1) -> np.ndarray:
+        """Indices of windows in which some coordinate moves faster than 20 smoothing
+        velocities (from a velocity estimate (W, M + 1, n_q)), widened by ``margin``
+        windows on each side within the experiment: the part of a record that carries
+        dynamics (at rest, the dynamics are stiff and cost most to integrate)."""
+        vs = np.array(
+            [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.model.coordinates]
+        )
+        moving = np.any(np.abs(velocity) > 20 * vs, axis=(1, 2))
+        widened = moving.copy()
+        for shift in range(1, margin + 1):
+            same_prev = np.r_[
+                np.zeros(shift, bool),
+                self.window_experiment[shift:] == self.window_experiment[:-shift],
+            ]
+            same_next = np.r_[
+                self.window_experiment[:-shift] == self.window_experiment[shift:],
+                np.zeros(shift, bool),
+            ]
+            widened |= np.r_[np.zeros(shift, bool), moving[:-shift]] & same_prev
+            widened |= np.r_[moving[shift:], np.zeros(shift, bool)] & same_next
+        return np.flatnonzero(widened)
 
     # ------------------------------------------------------------------ initial guess
     def initial_nodes(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -153,6 +183,9 @@ class MultipleShooting:
         cq = self.c[:, : self.nq]
         nodes = np.zeros((self.n_windows, self.nx))
         velocity = np.zeros((self.n_windows, self.m + 1, self.nq))
+        self.measured_positions: list[np.ndarray] = []
+        self.rigid_positions: list[np.ndarray] = []
+        self.measured_usable: list[np.ndarray] = []
         for e, exp in enumerate(self.problem.experiments):
             n = exp.n_samples
             weights = exp.valid / self.problem.channel_std
@@ -171,6 +204,9 @@ class MultipleShooting:
                 q = int(np.argmax(np.abs(cq[j])))
                 positions[exp.valid[:, j], q] = exp.outputs[exp.valid[:, j], j]
             rates = np.gradient(rigid, self.dt, axis=0) if n > 1 else np.zeros_like(rigid)
+            self.measured_positions.append(positions)
+            self.rigid_positions.append(rigid)
+            self.measured_usable.append(np.all(exp.valid, axis=1))
             for i in np.flatnonzero(self.window_experiment == e):
                 k0 = self.window_start[i]
                 nodes[i, : self.nq] = positions[k0]
@@ -265,51 +301,78 @@ class MultipleShooting:
         smoothing: tuple[float, float],
         velocity_hint: np.ndarray | None = None,
         plan: dict | None = None,
+        windows: np.ndarray | None = None,
+        base: Evaluation | None = None,
     ) -> Evaluation:
-        """Residuals, Jacobians and window ends at (nodes, theta)."""
+        """Residuals, Jacobians and window ends at (nodes, theta).
+
+        With ``windows`` (and ``base``), only those windows are integrated; the others are
+        taken from ``base`` (which must be at the same theta for the result to be one point).
+        """
         p = self.problem.parameters(theta)
         plan = plan or self.substep_plan(p, smoothing)
-        w, m, nx = self.n_windows, self.m, self.nx
+        w, m, nx, nd = self.n_windows, self.m, self.nx, self.nx + self.nf
+        todo = np.arange(w) if windows is None else np.asarray(windows)
         if velocity_hint is None:
             velocity_hint = np.repeat(nodes[:, None, self.nq :], m + 1, axis=1)
-        stiff = self._needs_stiff(velocity_hint, plan["threshold"])
+        stiff = np.zeros(w, dtype=bool)
+        stiff[todo] = self._needs_stiff(velocity_hint[todo], plan["threshold"])
         xs = np.empty((w, m, nx))
-        ss = np.empty((w, m, nx, nx + self.nf))
-        done = np.zeros(w, dtype=bool)
+        ss = np.empty((w, m, nx, nd))
+        pending = np.zeros(w, dtype=bool)
+        pending[todo] = True
         for attempt in range(2):
             for flag, n_sub in ((False, plan["fast"]), (True, plan["stiff"])):
-                idx = np.flatnonzero((stiff == flag) & ~done)
+                idx = np.flatnonzero((stiff == flag) & pending)
                 if idx.size:
                     xs[idx], ss[idx] = self._integrate(idx, nodes, p, smoothing, n_sub)
             if plan["fast"] == plan["stiff"] or attempt == 1:
                 break
-            traj = np.concatenate([nodes[:, None, :], xs], axis=1)[:, :, self.nq :]
-            recheck = (~stiff) & self._needs_stiff(traj, plan["threshold"])
-            done = ~recheck
+            traj = np.concatenate([nodes[todo, None, :], xs[todo]], axis=1)[:, :, self.nq :]
+            recheck = np.zeros(w, dtype=bool)
+            recheck[todo] = (~stiff[todo]) & self._needs_stiff(traj, plan["threshold"])
             if not recheck.any():
                 break
-            stiff = stiff | recheck
-        states = np.concatenate([nodes[:, None, :], xs], axis=1)  # (W, M + 1, n_x)
-        eye = np.broadcast_to(
-            np.hstack([np.eye(nx), np.zeros((nx, self.nf))]), (w, 1, nx, nx + self.nf)
-        )
-        sens = np.concatenate([eye, ss[:, :-1]], axis=1)  # (W, M, n_x, n_d) at samples 0..M-1
-        y = np.einsum("jx,wkx->wkj", self.c, states[:, :m])
-        residual = self.weight * (y - self.measured)
-        jac = np.einsum("jx,wkxd->wkjd", self.c, sens) * self.weight[..., None]
+            pending = recheck
+            stiff |= recheck
+        t = todo
+        states_t = np.concatenate([nodes[t, None, :], xs[t]], axis=1)  # (T, M + 1, n_x)
+        eye = np.broadcast_to(np.eye(nx, nd), (len(t), 1, nx, nd))
+        sens_t = np.concatenate([eye, ss[t, :-1]], axis=1)  # at samples 0..M-1
+        weight = self.weight[t]
+        if self._output_index is not None:
+            y = states_t[:, :m, self._output_index]
+            jac = sens_t[:, :, self._output_index, :] * weight[..., None]
+        else:
+            y = np.einsum("jx,wkx->wkj", self.c, states_t[:, :m])
+            jac = np.einsum("jx,wkxd->wkjd", self.c, sens_t) * weight[..., None]
+        residual_t = weight * (y - self.measured[t])
         p_free = p[list(self.problem.free)]
-        jac_theta = jac[..., nx:] * p_free
-        end = ss[:, -1]
+        end = ss[t, -1]
+        parts = {
+            "residual": residual_t,
+            "jac_node": jac[..., :nx],
+            "jac_theta": jac[..., nx:] * p_free,
+            "x_end": xs[t, -1],
+            "a_end": end[:, :, :nx],
+            "b_end": end[:, :, nx:] * p_free,
+            "states": states_t,
+        }
+        if windows is None:
+            return Evaluation(
+                **parts,
+                n_substeps=(plan["fast"], plan["stiff"]),
+                n_stiff_windows=int(stiff.sum()),
+            )
+        merged = {}
+        for name, value in parts.items():
+            array = getattr(base, name).copy()
+            array[t] = value
+            merged[name] = array
         return Evaluation(
-            residual=residual,
-            jac_node=jac[..., :nx],
-            jac_theta=jac_theta,
-            x_end=xs[:, -1],
-            a_end=end[:, :, :nx],
-            b_end=end[:, :, nx:] * p_free,
-            states=states,
+            **merged,
             n_substeps=(plan["fast"], plan["stiff"]),
-            n_stiff_windows=int(stiff.sum()),
+            n_stiff_windows=base.n_stiff_windows,
         )
 
     def defects(self, ev: Evaluation, nodes: np.ndarray, links=None) -> np.ndarray:
@@ -319,6 +382,53 @@ class MultipleShooting:
         d = (ev.x_end[:-1] - nodes[1:]) / self.defect_scale
         d[~links] = 0.0
         return d
+
+    def fill_nodes(
+        self,
+        nodes: np.ndarray,
+        known: np.ndarray,
+        theta: np.ndarray,
+        smoothing: tuple[float, float],
+    ) -> np.ndarray:
+        """Nodes of the windows not ``known`` (bool per window), by simulating forward from
+        the last known node before them (or from rest at the measured start positions)."""
+        from hframe_id.simulation.open_loop import simulate
+
+        p = self.problem.parameters(theta)
+        n_sub = self.substep_plan(p, smoothing)["stiff"]
+        nodes = nodes.copy()
+        known = known.copy()
+        for e, exp in enumerate(self.problem.experiments):
+            idx = np.flatnonzero(self.window_experiment == e)
+            if not known[idx[0]]:
+                # The record starts at rest (pre-roll): measured positions, no speed.
+                nodes[idx[0], self.nq :] = 0.0
+                known[idx[0]] = True
+            i = 0
+            while i < idx.size:
+                if known[idx[i]]:
+                    i += 1
+                    continue
+                j = i
+                while j < idx.size and not known[idx[j]]:
+                    j += 1
+                # Windows idx[i:j] are unknown: simulate from the previous window's node.
+                k0 = self.window_start[idx[i - 1]]
+                x0 = nodes[idx[i - 1]]
+                k1 = self.window_start[idx[j - 1]]
+                states = simulate(
+                    self.model,
+                    p,
+                    exp.inputs[k0:k1],
+                    self.dt,
+                    x0=x0,
+                    n_substeps=n_sub,
+                    smoothing=smoothing,
+                )
+                for w in idx[i:j]:
+                    nodes[w] = states[self.window_start[w] - k0]
+                i = j
+        return nodes
 
     def simulate_outputs(
         self, nodes0: np.ndarray, theta: np.ndarray, smoothing: tuple[float, float]

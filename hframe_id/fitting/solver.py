@@ -35,6 +35,9 @@ NODE_DAMPING = 1e-6
 MAX_NODE_DAMPING = 1e8
 #: Proximal weight on node velocity steps (continuity stages), see ``set_smoothing``.
 PROX_WEIGHT = 1.0
+#: The proximal weight adapts like a Levenberg-Marquardt damping within these factors.
+MIN_PROX_SCALE = 1e-3
+MAX_PROX_SCALE = 1e4
 #: Watchdog of the continuity stages.
 WATCHDOG_FACTOR = 10.0
 WATCHDOG_PATIENCE = 4
@@ -78,7 +81,7 @@ def _damped(h: np.ndarray, lam: float) -> np.ndarray:
     d = np.maximum(diag, floor)
     out = h.copy()
     idx = np.arange(h.shape[-1])
-    out[..., idx, idx] += lam * d
+    out[..., idx, idx] += np.asarray(lam)[..., None] * d
     return out
 
 
@@ -113,6 +116,10 @@ def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.
     return step(hi), False
 
 
+def _window_costs(ev: Evaluation) -> np.ndarray:
+    return 0.5 * np.sum(ev.residual**2, axis=(1, 2))
+
+
 class GaussNewton:
     """Iterates the stages of the lifted problem."""
 
@@ -122,7 +129,8 @@ class GaussNewton:
         self.progress = progress
         self.evaluations = 0
         self.links = shooting.linked.copy()
-        self.prox = np.zeros(shooting.nx)
+        self.prox_unit = np.zeros(shooting.nx)
+        self.prox_scale = 1.0
         self.node_damping = NODE_DAMPING
 
     def set_smoothing(self, smoothing, proximal: bool = True):
@@ -134,7 +142,12 @@ class GaussNewton:
             [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.ms.model.coordinates]
         )
         weight = PROX_WEIGHT if proximal else 0.0
-        self.prox = np.concatenate([np.zeros(self.ms.nq), weight / vs**2])
+        self.prox_unit = np.concatenate([np.zeros(self.ms.nq), weight / vs**2])
+        self.prox_scale = 1.0
+
+    @property
+    def prox(self) -> np.ndarray:
+        return self.prox_unit * self.prox_scale
 
     def _evaluate(self, state: SolverState, nodes, theta, smoothing) -> Evaluation:
         self.evaluations += 1
@@ -186,7 +199,10 @@ class GaussNewton:
         h_pp = he[:, nx:, nx:].sum(axis=0)
         g_p = ge[:, nx:].sum(axis=0)
         # Eliminate the segments' first-node steps (block diagonal) by a Schur complement.
-        h_ss_d = _damped(h_ss, self.node_damping) + np.diag(self.prox)
+        damping = self.node_damping
+        if np.ndim(damping):  # per window (independent windows: one window per segment)
+            damping = damping[np.flatnonzero(np.r_[True, ~links])]
+        h_ss_d = _damped(h_ss, damping) + np.diag(self.prox)
         k = np.linalg.solve(h_ss_d, np.concatenate([h_sp, g_s[:, :, None]], axis=2))
         k_sp, k_g = k[:, :, :-1], k[:, :, -1]
         h_red = h_pp - np.einsum("sij,sik->jk", h_sp, k_sp)
@@ -197,10 +213,14 @@ class GaussNewton:
             ds0 = -(k_g + np.einsum("sij,j->si", k_sp, dtheta_free))
             ze = np.concatenate([ds0[segment], np.broadcast_to(dtheta_free, (w, nf))], axis=1)
             dnodes = offsets + np.einsum("wij,wj->wi", gains, ze)
-            jd = np.einsum("wri,wi->wr", js_all, dnodes) + np.einsum(
-                "wri,i->wr", jp_all, dtheta_free
-            )
+            jd_theta = np.einsum("wri,i->wr", jp_all, dtheta_free)
+            jd = np.einsum("wri,wi->wr", js_all, dnodes) + jd_theta
             # Change of the cost along the step to second order; the defects close (linearly).
+            # Per window too, with and without the window's node step (for the windows stage).
+            self.window_change = (
+                np.sum(r_all * jd + 0.5 * jd * jd, axis=1),
+                np.sum(r_all * jd_theta + 0.5 * jd_theta * jd_theta, axis=1),
+            )
             return dnodes, float(np.sum(r_all * jd) + 0.5 * np.sum(jd * jd))
 
         return h_red, g_red, complete
@@ -288,7 +308,7 @@ class GaussNewton:
         grad[1:] -= mu[:-1, None] * inv[None, :] * d[:-1]
         h_pp = np.einsum("wri,wrj->ij", jp, jp) + np.einsum("w,wki,wkj->ij", mu, b, b)
         g_p = np.einsum("wri,wr->i", jp, r) + np.einsum("w,wki,wk->i", mu, b, d)
-        diag_d = _damped(diag, self.node_damping) + np.diag(self.prox)[None]
+        diag_d = _damped(diag, np.max(self.node_damping)) + np.diag(self.prox)[None]
         # Block Thomas: solve H_ss X = [cross, grad] for all right-hand sides at once.
         rhs = np.concatenate([cross, grad[:, :, None]], axis=2)
         c_prime = np.empty((w, nx, nx))
@@ -350,8 +370,10 @@ class GaussNewton:
         """
         start = time.perf_counter()
         ms = self.ms
-        self.node_damping = NODE_DAMPING
         windows = stage == "windows"
+        # Independent windows get a damping each (their node steps are accepted or
+        # rejected window by window); chained windows share one.
+        self.node_damping = np.full(ms.n_windows, NODE_DAMPING) if windows else NODE_DAMPING
         self.set_smoothing(smoothing, proximal=True)
         self.links = ms.linked.copy()
         if windows:
@@ -381,15 +403,16 @@ class GaussNewton:
             free = state.active.copy()
             index = np.flatnonzero(free)
             damping_used = None
-            while radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
-                if damping_used != self.node_damping:
+            while radius >= MIN_RADIUS and np.min(self.node_damping) <= MAX_NODE_DAMPING:
+                key = (np.sum(np.log(self.node_damping)), self.prox_scale)
+                if damping_used != key:
                     if penalty is None:
                         h_red, g_red, complete = self._linearize(ev, state.nodes, free)
                     else:
                         h_red, g_red, complete = self._linearize_penalty(
                             ev, state.nodes, free, penalty
                         )
-                    damping_used = self.node_damping
+                    damping_used = key
                 # Hold parameters at a bound whose step points outward, then clip.
                 sub = np.ones(len(index), dtype=bool)
                 for _ in range(len(index) + 1):
@@ -418,14 +441,41 @@ class GaussNewton:
                 else:
                     predicted = -change
                 trial = self._evaluate(state, nodes_new, theta_new, smoothing)
+                if windows:
+                    # Windows are independent: keep the old node where a window got worse
+                    # (its step left the region where the linear model holds), and damp it.
+                    worse = _window_costs(trial) > _window_costs(ev)
+                    worse |= ~np.isfinite(_window_costs(trial))
+                    if worse.any():
+                        nodes_new = np.where(worse[:, None], state.nodes, nodes_new)
+                        trial = self.ms.evaluate(
+                            nodes_new,
+                            theta_new,
+                            smoothing,
+                            state.velocity_hint,
+                            windows=np.flatnonzero(worse),
+                            base=trial,
+                        )
+                        self.evaluations += 1
+                    self.node_damping = np.where(
+                        worse,
+                        self.node_damping * 10.0,
+                        np.maximum(self.node_damping / 3.0, NODE_DAMPING),
+                    )
+                    full, theta_only = self.window_change
+                    predicted = -float(np.sum(np.where(worse, theta_only, full)))
                 new = merit(trial, nodes_new)
                 ratio = (current - new) / predicted if predicted > 0 else -1.0
                 length = float(np.linalg.norm(d))
                 if not np.isfinite(new) or ratio < 0.25:
                     radius = 0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * radius
-                    self.node_damping *= 10.0
+                    if not windows:
+                        self.node_damping *= 10.0
+                    self.prox_scale = min(self.prox_scale * 10.0, MAX_PROX_SCALE)
                 elif ratio > 0.75:
-                    self.node_damping = max(NODE_DAMPING, self.node_damping / 10.0)
+                    if not windows:
+                        self.node_damping = max(NODE_DAMPING, self.node_damping / 10.0)
+                    self.prox_scale = max(self.prox_scale / 4.0, MIN_PROX_SCALE)
                     if length >= 0.9 * radius:
                         radius = min(2 * radius, MAX_RADIUS)
                 if windows or penalty is not None:
