@@ -252,6 +252,7 @@ def fit_recordings(
         known[starts] = False
         nodes[moving] = sub_state.nodes
         nodes = ms.fill_nodes(nodes, known, theta, smoothing)
+    ms.uniform_substeps = True
     gn = GaussNewton(ms, progress)
     state = SolverState(nodes, theta, np.ones(n_free, dtype=bool), velocity_hint=velocity)
     stages.append(

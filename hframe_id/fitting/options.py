@@ -21,7 +21,7 @@ from hframe_id.errors import OptionError
 #: the difference between the two amplifiers (section 4.3).
 DEFAULT_FIXED = ("r", "K_t", "K_e", "R", "g_1", "l_l0", "l_r0", "l_b0")
 
-UNCERTAINTY_METHODS = ("hac", "gauss-newton")
+UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 
 
 @dataclass(frozen=True)
@@ -74,9 +74,12 @@ class FitOptions:
     defect_tol : continuity defects, in units of the measurement noise, at convergence.
     identifiability_threshold : a free parameter whose relative standard error exceeds this
         is reported as not identified, fixed at its initial value and the fit re-solved.
-    uncertainty : ``"hac"`` (default): covariance robust to residual autocorrelation
-        (Newey-West sandwich per channel and experiment, which quantization errors need);
-        ``"gauss-newton"``: the textbook sigma^2 (J^T J)^-1 (understates errors 5-10x here).
+    uncertainty : ``"robust"`` (default): per parameter the larger of the ``"noise-model"``
+        and ``"hac"`` errors; ``"noise-model"``: parametric bootstrap of the linearised
+        estimator with the rig's noise model (encoder quantization, laser noise);
+        ``"hac"``: Newey-West sandwich per channel and experiment; ``"gauss-newton"``: the
+        textbook s^2 (J^T J)^-1, which understates the errors 5x here (quantization errors
+        are not white). See ``hframe_id.fitting.statistics``.
     confidence : level of the reported intervals.
     substep_safety, max_substeps : RK4 substeps are chosen from the current parameters so
         |lambda| h <= 2.785 / safety (see ``hframe_id.simulation.integrators``), capped.
@@ -95,10 +98,10 @@ class FitOptions:
     smoothing_schedule: tuple[float, ...] = (1.0,)
     first_stage: bool = True
     max_iterations: int = 60
-    step_tol: float = 1e-7
+    step_tol: float = 1e-6
     defect_tol: float = 1e-2
     identifiability_threshold: float = 0.1
-    uncertainty: str = "hac"
+    uncertainty: str = "robust"
     confidence: float = 0.95
     substep_safety: float = 1.5
     max_substeps: int = 200

@@ -72,6 +72,7 @@ class FitProblem:
     log_upper: np.ndarray
     experiments: tuple[Experiment, ...]
     channel_std: np.ndarray  # (n_y,) [SI]
+    quantization: np.ndarray  # (n_y,) encoder step [rad] of quantized channels, else 0
     sample_period_s: float
     smoothing: tuple[float, float]
     options: FitOptions
@@ -139,6 +140,15 @@ def applied_inputs(recording: Recording) -> np.ndarray:
         )
         return dac.dac(recording.inputs)
     return np.asarray(recording.inputs, dtype=float)
+
+
+def encoder_step(recording: Recording, output: str) -> float:
+    """Quantization step [rad] of an encoder channel (angles), 0 for other channels or when
+    the rig metadata do not give the resolution."""
+    counts = recording.rig.get("encoder_counts_per_rev")
+    if not output.startswith("phi") or counts is None:
+        return 0.0
+    return 2 * math.pi / float(counts)
 
 
 def default_channel_std(recording: Recording, output: str) -> float:
@@ -273,6 +283,7 @@ def build_problem(
             for name in outputs
         ]
     )
+    quantization = np.array([encoder_step(recordings[0], name) for name in outputs])
     n_unknown = model.n_states * len(experiments) + len(free)
     n_valid = int(sum(e.valid.sum() for e in experiments))
     for e in experiments:
@@ -296,6 +307,7 @@ def build_problem(
         log_upper=np.array(upper),
         experiments=experiments,
         channel_std=std,
+        quantization=quantization,
         sample_period_s=float(recordings[0].sample_period_s),
         smoothing=(float(smoothing[0]), float(smoothing[1])),
         options=options,

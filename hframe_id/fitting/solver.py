@@ -25,6 +25,7 @@ import numpy as np
 
 from hframe_id.fitting.options import FitProgress
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
+from hframe_id.fitting.statistics import Block
 
 #: Trust region on the log-parameters (2-norm): start, largest, smallest before giving up.
 MAX_RADIUS = 4.0
@@ -262,12 +263,22 @@ class GaussNewton:
         position[rows] = np.arange(rows.size)
         blocks = []
         names = self.problem.output_names
+        measured = ms.measured[valid]
         for e, exp in enumerate(self.problem.experiments):
             idx = np.flatnonzero(ms.window_experiment == e)
             for j, name in enumerate(names):
                 sel = order[idx, :, j].ravel()
                 sel = position[sel]
-                blocks.append((f"{exp.name}:{name}", sel[sel >= 0]))
+                rows = sel[sel >= 0]
+                blocks.append(
+                    Block(
+                        label=f"{exp.name}:{name}",
+                        rows=rows,
+                        sigma=float(self.problem.channel_std[j]),
+                        quantization_step=float(self.problem.quantization[j]),
+                        measured=measured[rows],
+                    )
+                )
         return full[valid], ev.residual[valid], blocks
 
     def _linearize_penalty(self, ev: Evaluation, nodes, free: np.ndarray, weight: float):
@@ -466,6 +477,12 @@ class GaussNewton:
                     predicted = -float(np.sum(np.where(worse, theta_only, full)))
                 new = merit(trial, nodes_new)
                 ratio = (current - new) / predicted if predicted > 0 else -1.0
+                if abs(predicted) <= 1e-9 * (abs(current) + 1.0) and new <= current:
+                    # At the optimum the predicted gain is rounding noise: no verdict.
+                    ratio = 0.5
+                if not windows and penalty is None and new <= current:
+                    # Exact stages judge steps by the watchdog; shrink only on an increase.
+                    ratio = max(ratio, 0.5)
                 length = float(np.linalg.norm(d))
                 if not np.isfinite(new) or ratio < 0.25:
                     radius = 0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * radius

@@ -4,25 +4,35 @@ At a converged multiple-shooting solution the continuity holds, and the condense
 J (rows: weighted residuals; columns: each experiment's initial state, then the free
 log-parameters) is the single-shooting Jacobian. From it:
 
-- Fisher information F = J^T J (residuals are in noise units), and the textbook covariance
-  s^2 F^-1 with s^2 = 2 cost / (n - n_unknowns).
-- A covariance robust to correlated residuals (``"hac"``, the default): the sandwich
-  F^-1 Omega F^-1 with Omega = sum over (experiment, channel) blocks of
-  sum_{t,s} w(|t - s|) g_t g_s^T, g_t = J_t^T r_t the score of sample t, and w the Bartlett
-  (Newey-West) kernel of bandwidth L. Encoder quantization error is not white: while a
-  motor creeps or stands it is constant for hundreds of samples, which the textbook formula
-  treats as hundreds of independent looks (it understates errors 5-10x). L is chosen per
-  block from the residuals: the lag at which their autocorrelation first falls below
-  2 / sqrt(n), times ``BANDWIDTH_FACTOR``, within [``MIN_BANDWIDTH``, n / 4].
-- Identifiability: the relative standard error of each free parameter (the std of its log),
-  and its collinearity index sqrt((C^-1)_ii), C the information about the parameters (initial
-  states eliminated) scaled to unit diagonal: how much the other parameters' freedom inflates
-  its variance (Brun et al. 2001 use the same normalisation).
+- ``"gauss-newton"``: the textbook covariance s^2 (J^T J)^-1, s^2 = |r|^2 / (n - n_unknowns).
+  It assumes independent errors. Encoder quantization errors are not independent: while a
+  motor stands or creeps the error is constant, and at steady speed it follows a slow
+  aliased sawtooth, so this understates the errors 5-10x (measured: z-scores of rms 5).
+- ``"hac"``: the sandwich (J^T J)^-1 Omega (J^T J)^-1, Omega summing the scores g_t = J_t r_t
+  of each experiment and channel with Bartlett (Newey-West) weights over a bandwidth taken
+  from the residuals' autocorrelation. Robust to correlation of any origin, but with errors
+  correlated over hundreds of samples it has few effective blocks and still understates
+  (measured: rms z 1.7, coverage of nominal 95 % intervals 73 %).
+- ``"noise-model"``: a parametric bootstrap of the linearised estimator with the rig's own
+  noise model. Each replicate draws a new encoder power-up phase u and laser noise, forms
+  the errors they would produce along the fitted trajectory (quantization: step * (floor(
+  phi / step + u) - floor(u)) - phi; lasers: Gaussian), and maps them through
+  -(J^T J)^-1 J^T. This reproduces the plateaus and aliasing of quantization exactly, costs
+  one matrix product for all replicates (no refits), and is calibrated on simulated data
+  (rms z 0.9, coverage 99 %, see docs/fitting.md).
+- ``"robust"`` (default): per parameter the larger of ``noise-model`` and ``hac`` standard
+  errors, each scaled up by the residual std when the residuals are larger than the noise
+  model says (a misfit the noise model does not know about).
+
+Identifiability: the relative standard error of each free parameter (the std of its log),
+and its collinearity index sqrt((C^-1)_ii), C the information about the parameters (initial
+states eliminated) scaled to unit diagonal: how much the other parameters' freedom inflates
+its variance (Brun et al. 2001 use the same normalisation).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import signal
@@ -31,6 +41,20 @@ from scipy.stats import norm
 #: Bandwidth rule of the HAC estimator (samples): factor on the decorrelation lag, floor.
 BANDWIDTH_FACTOR = 2.0
 MIN_BANDWIDTH = 10
+#: Replicates of the noise-model bootstrap and its seed (results are reproducible).
+BOOTSTRAP_REPLICATES = 400
+BOOTSTRAP_SEED = 20070501
+
+
+@dataclass(frozen=True)
+class Block:
+    """Rows of one experiment's channel, in time order, with its noise model."""
+
+    label: str
+    rows: np.ndarray
+    sigma: float  # the residual weight is 1 / sigma
+    quantization_step: float  # > 0: an encoder (uniform quantization), 0: Gaussian
+    measured: np.ndarray = field(repr=False)  # measured values of these rows [SI]
 
 
 @dataclass
@@ -43,6 +67,8 @@ class Statistics:
     correlation: np.ndarray
     relative_std: np.ndarray
     relative_std_gn: np.ndarray
+    relative_std_hac: np.ndarray
+    relative_std_noise: np.ndarray
     collinearity: np.ndarray
     collinearity_set: float
     noise_scale: float  # s: residual std in noise units
@@ -81,10 +107,32 @@ def decorrelation_lag(r: np.ndarray) -> int:
     return int(below[0]) if below.size else n
 
 
+def noise_model_errors(
+    blocks: list[Block], residual: np.ndarray, rng: np.random.Generator, replicates: int
+) -> np.ndarray:
+    """(n, replicates) weighted errors the rig's sensors would make along the fitted
+    trajectory: fresh encoder phases (quantization) and laser noise (Gaussian)."""
+    errors = np.zeros((residual.size, replicates))
+    for block in blocks:
+        rows = block.rows
+        if rows.size == 0:
+            continue
+        if block.quantization_step > 0:
+            step = block.quantization_step
+            # The fitted trajectory: residual = (model - measured) / sigma.
+            model = block.measured + residual[rows] * block.sigma
+            u = rng.uniform(size=replicates)
+            counts = np.floor(model[:, None] / step + u[None, :]) - np.floor(u)[None, :]
+            errors[rows] = (counts * step - model[:, None]) / block.sigma
+        else:
+            errors[rows] = rng.standard_normal((rows.size, replicates))
+    return errors
+
+
 def compute_statistics(
     jac: np.ndarray,
     residual: np.ndarray,
-    blocks: list[tuple[str, np.ndarray]],
+    blocks: list[Block],
     n_nuisance: int,
     names: tuple[str, ...],
     method: str,
@@ -96,45 +144,66 @@ def compute_statistics(
     jac : (n, n_nuisance + n_theta) Jacobian of the weighted residuals, nuisance (initial
         states) columns first.
     residual : (n,) weighted residuals.
-    blocks : (label, row indices in time order) per experiment and channel.
+    blocks : per experiment and channel, the rows in time order and the noise model.
+    method : ``"robust"``, ``"noise-model"``, ``"hac"`` or ``"gauss-newton"``.
     """
     n, nz = jac.shape
     info = jac.T @ jac
     scale = np.sqrt(np.maximum(np.diag(info), 1e-300))
-    info_s = info / np.outer(scale, scale)
-    inv_s = np.linalg.pinv(info_s, rcond=1e-13, hermitian=True)
+    inv_s = np.linalg.pinv(info / np.outer(scale, scale), rcond=1e-13, hermitian=True)
     inv = inv_s / np.outer(scale, scale)
     dof = max(n - nz, 1)
     s2 = float(residual @ residual) / dof
-    cov_gn_full = s2 * inv
+    k = slice(n_nuisance, nz)
+    cov_gn = (s2 * inv)[k, k]
+    # HAC sandwich.
     bandwidths: dict[str, int] = {}
     omega = np.zeros((nz, nz))
-    for label, rows in blocks:
+    for block in blocks:
+        rows = block.rows
         if rows.size == 0:
             continue
         g = jac[rows] * residual[rows, None]
         lag = decorrelation_lag(residual[rows])
         bandwidth = int(min(max(BANDWIDTH_FACTOR * lag, MIN_BANDWIDTH), rows.size // 4))
-        bandwidths[label] = bandwidth
+        bandwidths[block.label] = bandwidth
         omega += g.T @ _bartlett_smooth(g, bandwidth)
     omega = 0.5 * (omega + omega.T)
-    cov_hac_full = inv @ omega @ inv
-    k = slice(n_nuisance, nz)
-    cov_gn = cov_gn_full[k, k]
-    cov_hac = cov_hac_full[k, k]
-    cov = cov_hac if method == "hac" else cov_gn
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    cov_hac = (inv @ omega @ inv)[k, k]
+    # Noise-model bootstrap of the linearised estimator.
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    errors = noise_model_errors(blocks, residual, rng, BOOTSTRAP_REPLICATES)
+    response = -(inv @ (jac.T @ errors))[k]  # (n_theta, replicates)
+    cov_noise = np.atleast_2d(np.cov(response))
+    inflation = max(1.0, float(np.sqrt(s2)))
     std_gn = np.sqrt(np.maximum(np.diag(cov_gn), 0.0))
+    std_hac = np.sqrt(np.maximum(np.diag(cov_hac), 0.0)) * inflation
+    std_noise = np.sqrt(np.maximum(np.diag(cov_noise), 0.0)) * inflation
+    if method == "gauss-newton":
+        cov = cov_gn
+    elif method == "hac":
+        cov = cov_hac * inflation**2
+    else:
+        base = cov_noise * inflation**2
+        if method == "robust":
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratio = np.where(std_noise > 0, np.maximum(std_hac / std_noise, 1.0), 1.0)
+            base = base * np.outer(ratio, ratio)
+        cov = base
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
     corr = np.nan_to_num(corr)
     # Collinearity: information about theta with the initial states eliminated.
-    a = info[:n_nuisance, :n_nuisance]
-    b = info[:n_nuisance, k]
-    red = info[k, k] - b.T @ np.linalg.lstsq(a, b, rcond=None)[0] if n_nuisance else info[k, k]
+    if n_nuisance:
+        a = info[:n_nuisance, :n_nuisance]
+        b = info[:n_nuisance, k]
+        red = info[k, k] - b.T @ np.linalg.lstsq(a, b, rcond=None)[0]
+    else:
+        red = info[k, k]
     d = np.sqrt(np.maximum(np.diag(red), 1e-300))
     c = red / np.outer(d, d)
-    eig = np.linalg.eigvalsh(c)
+    eig = np.linalg.eigvalsh(c) if c.size else np.ones(1)
     collinearity = np.sqrt(np.maximum(np.diag(np.linalg.pinv(c, hermitian=True)), 0.0))
     return Statistics(
         names=names,
@@ -143,6 +212,8 @@ def compute_statistics(
         correlation=corr,
         relative_std=std,
         relative_std_gn=std_gn,
+        relative_std_hac=std_hac,
+        relative_std_noise=std_noise,
         collinearity=collinearity,
         collinearity_set=float(1 / np.sqrt(max(eig[0], 1e-300))),
         noise_scale=float(np.sqrt(s2)),

@@ -44,6 +44,8 @@ class Trial:
     evaluations: int
     identified: dict[str, bool] = field(default_factory=dict)
     stages: str = ""
+    relative_std: dict[str, float] = field(default_factory=dict)
+    relative_std_gn: dict[str, float] = field(default_factory=dict)
 
     @property
     def max_error(self) -> float:
@@ -113,6 +115,8 @@ def run_trial(
         result.evaluations,
         identified,
         " | ".join(f"{st.iterations} it {st.wall_time_s:.1f}s" for st in result.stages),
+        {n: e.relative_std for n, e in result.estimates.items() if e.free},
+        {n: e.relative_std_gn for n, e in result.estimates.items() if e.free},
     )
 
 
