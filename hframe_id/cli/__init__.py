@@ -17,6 +17,7 @@ from hframe_id.cli import (
     control_command,
     datasets_command,
     export_command,
+    fit_command,
     inspect_command,
     linearize_command,
     models_command,
@@ -40,6 +41,7 @@ COMMAND_MODULES = (
     simulate_command,
     control_command,
     reproduce_command,
+    fit_command,
 )
 
 

@@ -1,0 +1,251 @@
+"""``hframe-id fit``: identify a model's parameters from MCAP recordings (multiple shooting)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+from hframe_id.errors import FitError, OptionError
+from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.options import UNCERTAINTY_METHODS
+from hframe_id.fitting.output import write_parameter_file
+from hframe_id.fitting.report import MODELS_DIR, THESIS_REFERENCE, write_report
+from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings import read_recording
+
+DATASETS_DIR = Path("datasets")
+
+
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(",") if part.strip())
+
+
+def _pairs(items: list[str], what: str) -> dict[str, str]:
+    pairs = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name or not value:
+            raise OptionError(f"{what} must look like NAME=VALUE, got {item!r}")
+        pairs[name.strip()] = value.strip()
+    return pairs
+
+
+def _float(text: str, what: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise OptionError(f"{what}: {text!r} is not a number") from None
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "fit",
+        help="fit stiffness, friction and inertia to recordings (multiple shooting)",
+        description=(
+            "Fit a model's parameters to one or more MCAP recordings of the same rig, jointly, "
+            "by multiple shooting in CasADi (Gauss-Newton on the lifted problem). Writes a "
+            "versioned parameter file <fit id>.yaml (only if the fit succeeds) and a report "
+            "<fit id>-report.md with plots to --out-dir. Exit status: 0 success, 1 the solver "
+            "failed (report only), 2 bad input."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument(
+        "files",
+        nargs="+",
+        metavar="FILE",
+        help="MCAP recordings; a bare name is looked up in datasets/",
+    )
+    parser.add_argument(
+        "--initial",
+        metavar="FILE",
+        help="initial parameter file (default: the thesis's set for the recordings' model: "
+        + ", ".join(f"{v}: models/{f}" for v, (f, _) in THESIS_REFERENCE.items())
+        + ")",
+    )
+    parser.add_argument(
+        "--model",
+        choices=tuple(THESIS_REFERENCE),
+        help="model variant to fit (default: the recordings' rig variant); picks the default "
+        "initial file",
+    )
+    parser.add_argument(
+        "--free",
+        metavar="NAMES",
+        help="comma-separated parameter names or patterns to fit (e.g. 'k_*,J_M*'); default: "
+        "every stiffness, mass, inertia, viscous and Coulomb friction parameter and g_2",
+    )
+    parser.add_argument(
+        "--fix",
+        metavar="NAMES",
+        default="",
+        help="comma-separated names or patterns to hold at their initial value",
+    )
+    parser.add_argument(
+        "--bounds",
+        metavar="NAME=LOW:HIGH",
+        action="append",
+        default=[],
+        help="bounds of a free parameter in SI units (repeatable)",
+    )
+    parser.add_argument(
+        "--bound-factor",
+        type=float,
+        default=10.0,
+        help="default bounds: initial value divided / multiplied by this",
+    )
+    parser.add_argument(
+        "--channel-std",
+        metavar="OUTPUT=STD",
+        action="append",
+        default=[],
+        help="noise std [rad or m] that weights an output's residuals (repeatable); default: "
+        "encoder step/sqrt(12) and the rig's laser noise",
+    )
+    parser.add_argument(
+        "--shooting-interval",
+        type=int,
+        default=10,
+        metavar="SAMPLES",
+        help="samples per shooting interval (a node every this many samples)",
+    )
+    parser.add_argument(
+        "--smoothing",
+        metavar="LIN,ANG",
+        help="final Coulomb smoothing velocities [m/s],[rad/s] (default: the model's 1e-3,1e-2)",
+    )
+    parser.add_argument(
+        "--smoothing-schedule",
+        metavar="F1,F2,...",
+        default="1",
+        help="continuation factors on the smoothing, decreasing to 1",
+    )
+    parser.add_argument(
+        "--no-first-stage",
+        action="store_true",
+        help="skip the stage of independent windows (continuity dropped)",
+    )
+    parser.add_argument(
+        "--max-iterations", type=int, default=60, help="Gauss-Newton iterations per stage"
+    )
+    parser.add_argument(
+        "--step-tol",
+        type=float,
+        default=1e-6,
+        help="converged when no parameter changes by more than this (relative)",
+    )
+    parser.add_argument(
+        "--defect-tol",
+        type=float,
+        default=1e-2,
+        help="continuity defects at convergence, in noise units",
+    )
+    parser.add_argument(
+        "--identifiability-threshold",
+        type=float,
+        default=0.1,
+        help="relative std error above which a parameter counts as not "
+        "identified and is held at its initial value",
+    )
+    parser.add_argument(
+        "--uncertainty",
+        choices=UNCERTAINTY_METHODS,
+        default="robust",
+        help="how standard errors are computed",
+    )
+    parser.add_argument("--threads", type=int, default=None, help="worker threads")
+    parser.add_argument("--out-dir", default="fits", help="where the fit and report go")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    parser.set_defaults(handler=run)
+
+
+def resolve_dataset(name: str) -> Path:
+    path = Path(name)
+    if path.exists():
+        return path
+    candidate = DATASETS_DIR / name
+    if candidate.exists():
+        return candidate
+    raise FitError(f"{name}: no such recording (also looked in {DATASETS_DIR}/)")
+
+
+def _options(args: argparse.Namespace) -> FitOptions:
+    bounds = {}
+    for name, text in _pairs(args.bounds, "--bounds").items():
+        low, sep, high = text.partition(":")
+        if not sep:
+            raise OptionError(f"--bounds {name}: expected LOW:HIGH, got {text!r}")
+        bounds[name] = (_float(low, f"--bounds {name}"), _float(high, f"--bounds {name}"))
+    channel_std = {
+        name: _float(value, f"--channel-std {name}")
+        for name, value in _pairs(args.channel_std, "--channel-std").items()
+    }
+    smoothing = None
+    if args.smoothing:
+        parts = _names(args.smoothing)
+        smoothing = tuple(_float(p, "--smoothing") for p in parts)
+    extra = {"threads": args.threads} if args.threads is not None else {}
+    return FitOptions(
+        free=_names(args.free) if args.free else None,
+        fix=_names(args.fix),
+        bounds=bounds,
+        bound_factor=args.bound_factor,
+        channel_std=channel_std,
+        shooting_interval=args.shooting_interval,
+        smoothing=smoothing,
+        smoothing_schedule=tuple(
+            _float(p, "--smoothing-schedule") for p in _names(args.smoothing_schedule)
+        ),
+        first_stage=not args.no_first_stage,
+        max_iterations=args.max_iterations,
+        step_tol=args.step_tol,
+        defect_tol=args.defect_tol,
+        identifiability_threshold=args.identifiability_threshold,
+        uncertainty=args.uncertainty,
+        verbose=0 if args.quiet else 1,
+        **extra,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    options = _options(args)
+    paths = [resolve_dataset(name) for name in args.files]
+    recordings = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for path in paths:
+            recordings.append(read_recording(path))
+    for warning in caught:
+        print(f"hframe-id: warning: {warning.message}", file=sys.stderr)
+    variant = args.model or recordings[0].variant
+    if args.initial:
+        initial_path = Path(args.initial)
+    else:
+        if variant not in THESIS_REFERENCE:
+            raise FitError(f"no default initial parameters for model {variant!r}; use --initial")
+        initial_path = MODELS_DIR / THESIS_REFERENCE[variant][0]
+    initial = load_parameter_file(initial_path, variant=variant)
+    out_dir = Path(args.out_dir)
+    if not args.quiet:
+        total = sum(rec.n_samples for rec in recordings)
+        print(
+            f"fitting {variant} to {len(recordings)} recording(s), {total} samples, "
+            f"starting from {initial_path}",
+            file=sys.stderr,
+        )
+    result = fit_recordings(recordings, initial, options)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fit_id, parameter_file = write_parameter_file(result, recordings, paths, initial_path, out_dir)
+    report = write_report(result, recordings, fit_id, parameter_file, out_dir)
+    print(result.summary())
+    if parameter_file:
+        print(f"parameter file: {parameter_file}")
+    print(f"report: {report}")
+    if not result.success:
+        print(
+            f"hframe-id: fit failed: {result.message}; no parameter file written", file=sys.stderr
+        )
+        return 1
+    return 0

@@ -1,0 +1,180 @@
+"""A fit's versioned parameter file: the fitted values plus provenance and uncertainty.
+
+The file is an ordinary parameter file (``hframe_id.parameters``), so the simulator, the
+controller and the exporters read it like the thesis's; its header adds
+
+- ``provenance``: fit id, time, software version and git commit, every dataset with its
+  sha256, model variant and options, free parameters with their initial values and the file
+  they came from, solver status, iterations, final cost, wall time;
+- ``uncertainty``: per free parameter the estimate, standard error, 95 % interval, whether the
+  data identify it (and which experiments would), plus the correlation matrix.
+
+Only a successful fit gets a parameter file: a failed one must not be taken for a good one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from hframe_id import __version__
+from hframe_id.errors import FitError
+from hframe_id.fitting.fit import FitResult
+from hframe_id.parameters import ParameterSet, save_parameter_file
+from hframe_id.recordings.recording import Recording
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def git_commit() -> str:
+    """The source tree's commit (with ``-dirty`` if it has changes), or ``"unknown"``."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
+        )
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    if commit.returncode != 0:
+        return "unknown"
+    return commit.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+
+
+def make_fit_id(variant: str, dataset_hashes: list[str], when: datetime) -> str:
+    """``<variant>-<UTC time>-<6 hex of the data>``: sortable, unique per data and second."""
+    data = hashlib.sha256("".join(sorted(dataset_hashes)).encode()).hexdigest()[:6]
+    return f"{variant}-{when.strftime('%Y%m%dT%H%M%SZ')}-{data}"
+
+
+def _number(value: float) -> float:
+    return float(f"{value:.10g}")
+
+
+def provenance(
+    result: FitResult,
+    recordings: list[Recording],
+    dataset_paths: list[Path],
+    initial_path: Path | None,
+    fit_id: str,
+    when: datetime,
+) -> dict[str, Any]:
+    hashes = [sha256_of(path) for path in dataset_paths]
+    return {
+        "fit_id": fit_id,
+        "created_utc": when.isoformat(timespec="seconds"),
+        "software": f"hframe-id {__version__}",
+        "git_commit": git_commit(),
+        "model": result.variant,
+        "model_options": {
+            "smoothing_final": list(result.options.smoothing)
+            if result.options.smoothing
+            else "model default (1e-3 m/s, 1e-2 rad/s)",
+        },
+        "datasets": [
+            {
+                "file": str(path),
+                "sha256": digest,
+                "samples": rec.n_samples,
+                "duration_s": _number(rec.duration_s),
+                "protocol": str(rec.experiment.get("notes", rec.experiment.get("protocol", ""))),
+            }
+            for path, digest, rec in zip(dataset_paths, hashes, recordings, strict=True)
+        ],
+        "fit_options": result.options.describe(),
+        "free_parameters": list(result.free_names),
+        "initial_values": {
+            est.key: _number(est.initial) for est in result.estimates.values() if est.free
+        },
+        "initial_source": str(initial_path) if initial_path else result.initial.source,
+        "solver": {
+            "method": "multiple shooting, Gauss-Newton on the lifted problem (CasADi)",
+            "success": bool(result.success),
+            "message": result.message,
+            "iterations": int(result.iterations),
+            "final_cost": _number(result.cost),
+            "wall_time_s": round(float(result.wall_time_s), 3),
+        },
+        "not_identified_held_at_initial": list(result.not_identified),
+    }
+
+
+def uncertainty(result: FitResult) -> dict[str, Any]:
+    level = f"{round(100 * result.options.confidence)} %"
+    per_parameter = {}
+    for est in result.estimates.values():
+        if not est.free:
+            continue
+        per_parameter[est.key] = {
+            "estimate": _number(est.estimate),
+            "std_error": _number(est.std_error),
+            f"interval_{level.replace(' %', '')}": [_number(est.ci95[0]), _number(est.ci95[1])],
+            "identified": bool(est.identified),
+            "at_bound": bool(est.at_bound),
+            **({"identified_by": list(est.identified_by)} if est.identified_by else {}),
+        }
+    return {
+        "method": result.options.uncertainty,
+        "confidence": level,
+        "parameters": per_parameter,
+        "correlation": {
+            "parameters": list(result.free_names),
+            "matrix": [[round(float(v), 6) for v in row] for row in result.correlation],
+        },
+    }
+
+
+def fitted_parameter_set(
+    result: FitResult, prov: dict[str, Any], dataset_names: list[str]
+) -> ParameterSet:
+    values = result.parameters.values
+    return ParameterSet(
+        variant=result.variant,
+        values=dict(values),
+        title=f"{result.variant} fitted to {', '.join(dataset_names)}",
+        source=f"hframe-id fit {prov['fit_id']}",
+        references=list(result.initial.references),
+        notes=f"Fitted by multiple shooting from {prov['initial_source']}.",
+        provenance=prov,
+        uncertainty=uncertainty(result),
+    )
+
+
+def write_parameter_file(
+    result: FitResult,
+    recordings: list[Recording],
+    dataset_paths: list[Path],
+    initial_path: Path | None,
+    out_dir: Path,
+    when: datetime | None = None,
+) -> tuple[str, Path | None]:
+    """Write ``<out_dir>/<fit id>.yaml`` for a successful fit; returns (fit id, path or None).
+
+    A failed fit gets an id (for its report) but no parameter file. An existing file is never
+    overwritten (``ParameterFileError``).
+    """
+    when = when or datetime.now(UTC)
+    fit_id = make_fit_id(result.variant, [sha256_of(p) for p in dataset_paths], when)
+    if not result.success:
+        return fit_id, None
+    prov = provenance(result, recordings, dataset_paths, initial_path, fit_id, when)
+    params = fitted_parameter_set(result, prov, [p.name for p in dataset_paths])
+    path = out_dir / f"{fit_id}.yaml"
+    if path.exists():
+        raise FitError(f"{path}: a fit with this id exists already; not overwriting it")
+    return fit_id, save_parameter_file(params, path)

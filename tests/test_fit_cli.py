@@ -1,0 +1,87 @@
+"""`hframe-id fit` end to end: files on success, none on failure, errors before solving."""
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hframe_id.cli import main
+from hframe_id.parameters import load_parameter_file
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "datasets" / "4V_xmotion.mcap"
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fits")
+    status = main(["fit", str(DATA), "--out-dir", str(out), "--quiet"])
+    return status, out
+
+
+def test_successful_fit_writes_a_loadable_versioned_parameter_file(fitted):
+    status, out = fitted
+    assert status == 0
+    (yaml_path,) = out.glob("*.yaml")
+    params = load_parameter_file(yaml_path, variant="hframe-8")
+    prov = params.provenance
+    assert prov["fit_id"] == yaml_path.stem
+    assert prov["datasets"][0]["sha256"] and len(prov["datasets"][0]["sha256"]) == 64
+    assert prov["solver"]["success"] is True
+    assert set(prov["free_parameters"]) >= {"k_l", "k_r", "k_b", "g_2"}
+    # every free parameter has estimate, error, interval and identifiability
+    for key, entry in params.uncertainty["parameters"].items():
+        low, high = entry["interval_95"]
+        assert low <= entry["estimate"] <= high, key
+        assert isinstance(entry["identified"], bool)
+    # the rig's aged belt (k x 0.85 of Table 4.1) must show in the fit, far beyond the interval
+    truth = load_parameter_file(ROOT / "datasets" / "truth" / "hframe-8-rig.yaml")
+    assert params.values["k_l"] == pytest.approx(truth.values["k_l"], rel=0.01)
+
+
+def test_report_compares_with_table_4_2_and_truth(fitted):
+    _, out = fitted
+    (report,) = out.glob("*-report.md")
+    text = report.read_text()
+    assert "Table 4.1 + 4.2" in text and "error vs truth" in text
+    plots = list(out.glob("*-plots/*.png"))
+    assert any(p.name == "4V_xmotion.png" for p in plots)
+
+
+def test_failed_fit_writes_no_parameter_file(tmp_path, capsys):
+    status = main(
+        ["fit", str(DATA), "--out-dir", str(tmp_path), "--quiet", "--max-iterations", "1"]
+    )
+    assert status == 1
+    assert not list(tmp_path.glob("*.yaml"))
+    (report,) = tmp_path.glob("*-report.md")
+    assert "FAILED" in report.read_text()
+    assert "no parameter file written" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["no_such.mcap"], "no such recording"),
+        ([str(DATA), "--free", "k_q"], "k_q"),
+        ([str(DATA), "--bounds", "k_l=1:2"], "k_l"),
+        ([str(DATA), "--bounds", "k_l=abc"], "LOW:HIGH"),
+        ([str(DATA), "--shooting-interval", "0"], "shooting interval"),
+        ([str(DATA), "--initial", str(ROOT / "models" / "one-axis-table2.3.yaml")], "one-axis"),
+        ([str(DATA), str(ROOT / "datasets" / "5V_oneaxis.mcap")], "one-axis"),
+    ],
+)
+def test_bad_input_fails_before_solving_and_writes_nothing(tmp_path, capsys, args, message):
+    status = main(["fit", *args, "--out-dir", str(tmp_path / "out"), "--quiet"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hframe-id: error:") and message in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_fit_file_header_is_plain_yaml(fitted):
+    _, out = fitted
+    (yaml_path,) = out.glob("*.yaml")
+    doc = yaml.safe_load(yaml_path.read_text())
+    assert list(doc)[:4] == ["format_version", "model", "title", "source"]
+    assert all(" [" in key for key in doc["parameters"])
