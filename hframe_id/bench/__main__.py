@@ -8,7 +8,7 @@ import platform
 import sys
 
 #: Section modules under hframe_id.bench; each has ``run() -> None`` that prints its results.
-SECTIONS: tuple[str, ...] = ("logging", "fitting")
+SECTIONS: tuple[str, ...] = ("simulation", "logging", "fitting")
 
 
 def main(argv: list[str] | None = None) -> int:
