@@ -37,10 +37,10 @@ from hframe_id.fitting.statistics import Statistics, compute_statistics
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 
-#: First output-error stage on the moving windows: continuity as a penalty (defects in noise
-#: units, this weight), a monotone trust-region method that stops once an iteration gains
-#: less than ``PENALTY_COST_RTOL``; it takes the equation-error start into the basin of the
-#: exact (condensed) Gauss-Newton iteration.
+#: Fallback stage on the moving windows when exact continuity from the equation-error start
+#: fails: continuity as a penalty (defects in noise units, this weight), a monotone
+#: trust-region method that stops once an iteration gains less than ``PENALTY_COST_RTOL``;
+#: it takes a poor start into the basin of the exact (condensed) Gauss-Newton iteration.
 PENALTY_WEIGHT = 1.0
 PENALTY_COST_RTOL = 1e-3
 #: Tolerances of the intermediate stages (the last stage uses the options' step_tol):
@@ -127,13 +127,14 @@ class FitResult:
         return "\n".join(lines)
 
 
-def _equation_error_report(seconds: float) -> StageReport:
+def _equation_error_report(seconds: float, used: bool) -> StageReport:
     return StageReport(
         name="equation error",
         smoothing=(math.nan, math.nan),
         iterations=0,
         converged=True,
-        message="linear-in-parameters regression on smoothed derivatives",
+        message="regression on differentiated data: "
+        + ("used as the start" if used else "worse than the given start, not used"),
         cost=math.nan,
         max_defect=math.nan,
         wall_time_s=seconds,
@@ -205,42 +206,62 @@ def fit_recordings(
     stages: list[StageReport] = []
     evaluations = 0
     if options.first_stage:
-        theta = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
-        stages.append(_equation_error_report(time.perf_counter() - start))
+        regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+        # Keep the regression only if it fits the data better than the given start does
+        # (both judged by the output error of independent shooting windows: one evaluation
+        # each). It is biased and can be poor where a coordinate is not measured.
+        probe = ms.subset(np.arange(ms.n_windows), linked=False)
+        costs = [
+            probe.evaluate(nodes, th, smoothing, velocity_hint=velocity).cost
+            for th in (theta, regressed)
+        ]
+        evaluations += 2
+        if np.isfinite(costs[1]) and costs[1] < costs[0]:
+            theta = regressed
+        stages.append(_equation_error_report(time.perf_counter() - start, costs[1] < costs[0]))
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
     # the stiff stretches at rest makes each evaluation several times cheaper.
     moving = ms.moving_windows(velocity, smoothing) if options.first_stage else np.arange(0)
     if 0 < moving.size < ms.n_windows:
         sub = ms.subset(moving)
         gn_sub = GaussNewton(sub, progress)
-        sub_state = SolverState(
-            nodes[moving], theta, np.ones(n_free, dtype=bool), velocity_hint=velocity[moving]
-        )
-        stages.append(
-            gn_sub.run(
-                sub_state,
-                "continuity",
-                _scaled(smoothing, schedule[0]),
-                options.max_iterations,
-                INTERMEDIATE_STEP_TOL,
-                math.inf,
-                cost_rtol=PENALTY_COST_RTOL,
-                radius=1.0,
-                penalty=PENALTY_WEIGHT,
+        for use_penalty in (False, True):
+            # Fast path: exact continuity straight from the equation-error start. If that
+            # fails (a poor start), the fallback first relaxes continuity into a penalty.
+            sub_state = SolverState(
+                nodes[moving].copy(),
+                theta.copy(),
+                np.ones(n_free, dtype=bool),
+                velocity_hint=velocity[moving],
             )
-        )
-        for factor in schedule:
-            stages.append(
-                gn_sub.run(
-                    sub_state,
-                    "continuity",
-                    _scaled(smoothing, factor),
-                    options.max_iterations,
-                    INTERMEDIATE_STEP_TOL,
-                    options.defect_tol,
-                    radius=0.5,
+            if use_penalty:
+                stages.append(
+                    gn_sub.run(
+                        sub_state,
+                        "continuity",
+                        _scaled(smoothing, schedule[0]),
+                        options.max_iterations,
+                        INTERMEDIATE_STEP_TOL,
+                        math.inf,
+                        cost_rtol=PENALTY_COST_RTOL,
+                        radius=1.0,
+                        penalty=PENALTY_WEIGHT,
+                    )
                 )
-            )
+            for factor in schedule:
+                stages.append(
+                    gn_sub.run(
+                        sub_state,
+                        "continuity",
+                        _scaled(smoothing, factor),
+                        options.max_iterations,
+                        INTERMEDIATE_STEP_TOL,
+                        INTERMEDIATE_DEFECT_TOL,
+                        radius=0.5,
+                    )
+                )
+            if stages[-1].converged:
+                break
         evaluations += gn_sub.evaluations
         theta = sub_state.theta
         known = np.zeros(ms.n_windows, dtype=bool)
@@ -269,8 +290,8 @@ def fit_recordings(
     held: dict[str, tuple[float, float, float]] = {}
     stats = _stats(gn, state, problem)
     for _ in range(n_free):
-        if not stages[-1].converged:
-            break
+        # Also when the stage did not converge: a sloppy direction (a parameter the data
+        # hardly determine) is the usual reason, and holding it lets the rest converge.
         active = np.flatnonzero(state.active)
         worst = int(np.argmax(stats.relative_std))
         if stats.relative_std[worst] <= options.identifiability_threshold:
@@ -293,7 +314,8 @@ def fit_recordings(
                 options.max_iterations,
                 options.step_tol,
                 options.defect_tol,
-                radius=0.5,
+                radius=0.1,
+                watchdog=False,
             )
         )
         stats = _stats(gn, state, problem)

@@ -97,7 +97,7 @@ class FitOptions:
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
     first_stage: bool = True
-    max_iterations: int = 60
+    max_iterations: int = 150
     step_tol: float = 1e-6
     defect_tol: float = 1e-2
     identifiability_threshold: float = 0.1

@@ -109,6 +109,8 @@ class MultipleShooting:
         #: the few-substep shortcut for windows in motion is accurate to ~1e-8 per sample
         #: but differs from a uniform discretization by up to a noise sigma over a record.
         self.uniform_substeps = False
+        #: (fast, stiff) substeps held during a stage (set by the solver), or None.
+        self.frozen_substeps: tuple[int, int] | None = None
         self.substep = compiled_substep(self.model, tuple(problem.free))
         # State scale for continuity defects: the noise of the channel measuring a coordinate
         # (or the smallest channel noise), velocities that over one sample.
@@ -149,6 +151,7 @@ class MultipleShooting:
         view.linked = consecutive if linked else np.zeros(len(windows) - 1, dtype=bool)
         view.first_window = np.flatnonzero(np.r_[True, ~view.linked])
         view._buffers = {}
+        view.frozen_substeps = None
         return view
 
     def moving_windows(self, velocity: np.ndarray, smoothing, margin: int = 1) -> np.ndarray:
@@ -315,6 +318,14 @@ class MultipleShooting:
         """
         p = self.problem.parameters(theta)
         plan = plan or self.substep_plan(p, smoothing)
+        if self.frozen_substeps is not None:
+            # Within a stage the discretization stays fixed (a jump from n to n + 1
+            # substeps moves the cost by noise-sized amounts and stalls the iteration near
+            # the optimum); it only grows when stability demands it.
+            fast, stiff = self.frozen_substeps
+            fast, stiff = max(fast, plan["fast"]), max(stiff, plan["stiff"])
+            self.frozen_substeps = (fast, stiff)
+            plan = {**plan, "fast": fast, "stiff": stiff}
         if self.uniform_substeps:
             plan = {**plan, "fast": plan["stiff"]}
         w, m, nx, nd = self.n_windows, self.m, self.nx, self.nx + self.nf

@@ -42,6 +42,7 @@ MAX_PROX_SCALE = 1e4
 #: Watchdog of the continuity stages.
 WATCHDOG_FACTOR = 10.0
 WATCHDOG_PATIENCE = 4
+WATCHDOG_MIN_RADIUS = 1e-2
 #: Continuity stages accept their first steps unconditionally: they close the defects left
 #: by the previous stage, which raises the cost (and the merit) before it falls.
 FREE_STEPS = 2
@@ -367,6 +368,7 @@ class GaussNewton:
         segment_windows: int | None = None,
         radius: float = 0.5,
         penalty: float | None = None,
+        watchdog: bool = True,
     ) -> StageReport:
         """Iterate one stage until converged; updates ``state`` in place.
 
@@ -391,6 +393,7 @@ class GaussNewton:
             cut = segment_windows or 1
             self.links &= (ms.window_index_in_experiment[1:] % cut) != 0
         lo, hi = self.problem.log_lower, self.problem.log_upper
+        ms.frozen_substeps = None
         ev = self._evaluate(state, state.nodes, state.theta, smoothing)
         state.evaluation = ev
         state.velocity_hint = ev.states[:, :, ms.nq :]
@@ -404,6 +407,9 @@ class GaussNewton:
             return ev_.cost + 0.5 * weight * float(np.sum(defects**2))
 
         best = (merit(ev, state.nodes), state.nodes, state.theta, ev)
+        # Exact stages start with the watchdog; once it has had to step back, they continue
+        # as a monotone trust-region method (so they cannot cycle).
+        monotone = windows or penalty is not None or not watchdog
         since_best = 0
         for iterations in range(1, max_iterations + 1):
             accepted = False
@@ -480,7 +486,7 @@ class GaussNewton:
                 if abs(predicted) <= 1e-9 * (abs(current) + 1.0) and new <= current:
                     # At the optimum the predicted gain is rounding noise: no verdict.
                     ratio = 0.5
-                if not windows and penalty is None and new <= current:
+                if not monotone and new <= current:
                     # Exact stages judge steps by the watchdog; shrink only on an increase.
                     ratio = max(ratio, 0.5)
                 length = float(np.linalg.norm(d))
@@ -495,10 +501,15 @@ class GaussNewton:
                     self.prox_scale = max(self.prox_scale / 4.0, MIN_PROX_SCALE)
                     if length >= 0.9 * radius:
                         radius = min(2 * radius, MAX_RADIUS)
-                if windows or penalty is not None:
+                if not monotone:
+                    # The watchdog guards the exact stages; the trust region only keeps
+                    # single steps sane, so it must not shrink to nothing over noise-level
+                    # merit changes near the optimum.
+                    radius = max(radius, WATCHDOG_MIN_RADIUS)
+                if monotone:
                     ok = np.isfinite(new) and ratio > 1e-4
                 elif iterations <= FREE_STEPS:
-                    ok = bool(np.isfinite(new))
+                    ok = bool(np.isfinite(new))  # closes the defects left by the last stage
                 else:
                     ok = np.isfinite(new) and new < WATCHDOG_FACTOR * best[0]
                 if ok:
@@ -511,7 +522,7 @@ class GaussNewton:
                 state.evaluation = ev
                 state.velocity_hint = ev.states[:, :, ms.nq :]
                 value = merit(ev, state.nodes)
-                if not windows and penalty is None and iterations <= FREE_STEPS:
+                if not monotone and iterations <= FREE_STEPS:
                     best = (value, state.nodes, state.theta, ev)
                     since_best = 0
                 elif value < best[0]:
@@ -524,7 +535,8 @@ class GaussNewton:
                     _, state.nodes, state.theta, ev = best
                     state.evaluation = ev
                     state.velocity_hint = ev.states[:, :, ms.nq :]
-                    radius = 0.1 * max(step, MIN_RADIUS)
+                    radius = max(0.1 * step, WATCHDOG_MIN_RADIUS)
+                    monotone = True
                     since_best = 0
                     full_step = False
             max_defect = float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0))
