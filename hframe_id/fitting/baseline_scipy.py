@@ -45,11 +45,11 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from hframe_id.errors import FitError, OptionError
+from hframe_id.fitting.problem import applied_inputs, default_channel_std
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-from hframe_id.recordings.sensors import SensorModel
-from hframe_id.simulation.compiled import maybe_compile
+from hframe_id.simulation.compiled import evaluate, maybe_compile
 from hframe_id.simulation.integrators import stable_substeps
 
 #: Parameters the fitter keeps fixed by default (issue 5): pulley radius, motor constants and
@@ -238,28 +238,6 @@ class _TimeLimit(Exception):
     """Raised inside the residual callbacks when ``max_time_s`` has passed."""
 
 
-def _call(function: ca.Function, inputs: Sequence[np.ndarray | float]) -> list[np.ndarray]:
-    """Evaluate ``function`` on NumPy arrays through CasADi's buffer interface (no DM
-    conversion, which costs ~15 ms per Jacobian of the six-experiment problem).
-
-    CasADi stores matrices column by column: an (n x m) input is given as its transpose, C
-    ordered, and an (n x m) output comes back as an (m, n) array.
-    """
-    buffer, run = function.buffer()
-    arrays = [np.ascontiguousarray(value, dtype=float) for value in inputs]
-    for i, array in enumerate(arrays):
-        if array.size != function.nnz_in(i):
-            raise ValueError(f"{function.name()} input {i} needs {function.nnz_in(i)} numbers")
-        buffer.set_arg(i, memoryview(array))
-    outputs = [
-        np.empty((function.size2_out(i), function.size1_out(i))) for i in range(function.n_out())
-    ]
-    for i, array in enumerate(outputs):
-        buffer.set_res(i, memoryview(array))
-    run()
-    return outputs
-
-
 @lru_cache(maxsize=8)
 def _substeps(model: Model, free: tuple[int, ...], compile_c: bool) -> tuple[ca.Function, ...]:
     """Compiled RK4 substeps of length h: plain (x, u, p, s, h) -> x+ and with sensitivities
@@ -332,37 +310,6 @@ def _trajectory(
     if n_columns > 1 and n_threads > 1:
         return record.map(n_columns, "thread", min(n_threads, n_columns))
     return record.map(n_columns)
-
-
-def _applied_inputs(recording: Recording) -> np.ndarray:
-    """Voltages the plant saw: recorded applied voltages, else the commands through the rig's
-    DAC when its metadata describe one, else the commands (as the fitter does)."""
-    applied = getattr(recording, "applied", None)
-    if applied is not None:
-        return np.asarray(applied, dtype=float)
-    rig = recording.rig
-    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
-        dac = SensorModel(
-            dac_bits=int(rig["dac_bits"]),
-            dac_min_v=float(rig["dac_min_v"]),
-            dac_max_v=float(rig["dac_max_v"]),
-        )
-        return dac.dac(recording.inputs)
-    return np.asarray(recording.inputs, dtype=float)
-
-
-def _channel_std(recording: Recording, output: str) -> float:
-    """Noise std of an output [rad or m]: encoder step / sqrt(12), or the laser noise std."""
-    rig = recording.rig
-    key = "encoder_counts_per_rev" if output.startswith("phi") else "laser_noise_std_m"
-    value = rig.get(key)
-    if value is None or not float(value) > 0:
-        raise FitError(
-            f"{recording.name()}: rig metadata lack a positive {key} to weight {output!r} by"
-        )
-    if output.startswith("phi"):
-        return 2 * math.pi / float(value) / math.sqrt(12)
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -455,7 +402,7 @@ def _prepare(
                 f"{where}: inputs {rec.input_names}, model needs "
                 f"{tuple(i.name for i in model.inputs)}"
             )
-        applied = _applied_inputs(rec)
+        applied = applied_inputs(rec)
         if not np.all(np.isfinite(applied)):
             raise FitError(f"{where}: inputs contain non-finite values")
         inputs[:, e, : rec.n_samples - 1] = applied[:-1].T
@@ -469,7 +416,7 @@ def _prepare(
                 raise FitError(f"{where}: output {name!r} is not one of the model's {names}")
             column = rec.outputs[:, j]
             ok = rec.valid[:, j] & np.isfinite(column)
-            sigma = _channel_std(rec, name)
+            sigma = default_channel_std(rec, name)
             k = names.index(name)
             measured[e, : rec.n_samples, k] = np.where(ok, column, 0.0)
             weights[e, : rec.n_samples, k] = 1.0 / sigma
@@ -560,7 +507,7 @@ class _SingleShooting:
         n_sub = self._substep_count(p)
         e = d.n_experiments
         trajectory = _trajectory(self.plain, n_sub, d.n_samples - 1, e, self.options.n_threads)
-        (states,) = _call(trajectory, [d.x0.T, d.inputs.T, *self._shared(p, n_sub, e)])
+        (states,) = evaluate(trajectory, [d.x0.T, d.inputs.T, *self._shared(p, n_sub, e)])
         r = self._weighted(self._outputs(states, e))
         if not np.all(np.isfinite(r)):
             r = np.where(np.isfinite(r), r, 1e10)  # diverged simulation: a large, finite cost
@@ -584,7 +531,7 @@ class _SingleShooting:
         n_sub = self._substep_count(p)
         e, nx, nf = d.n_experiments, self.model.n_states, len(self.free)
         trajectory = _trajectory(self.with_sens, n_sub, d.n_samples - 1, e, self.options.n_threads)
-        _, sens = _call(trajectory, [d.x0.T, d.inputs.T, *self._shared(p, n_sub, e)])
+        _, sens = evaluate(trajectory, [d.x0.T, d.inputs.T, *self._shared(p, n_sub, e)])
         sens = sens.reshape(e, d.n_samples - 1, nf, nx)  # CasADi's column-major layout
         dy = np.einsum("yx,enjx->enyj", d.output_matrix, sens)
         dy = np.concatenate([np.zeros((e, 1, *dy.shape[2:])), dy], axis=1)
@@ -603,7 +550,7 @@ class _SingleShooting:
         trajectory = _trajectory(
             self.plain, n_sub, d.n_samples - 1, columns, self.options.n_threads
         )
-        (states,) = _call(
+        (states,) = evaluate(
             trajectory,
             [
                 np.tile(d.x0.T, (nf + 1, 1)),
