@@ -36,7 +36,6 @@ import difflib
 import io
 import json
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +46,7 @@ import scipy.io
 
 from hframe_id import __version__
 from hframe_id.analysis.linear import LinearModel, linearize, natural_frequency_and_damping
+from hframe_id.atomic import replace_atomically
 from hframe_id.errors import ModelError, OptionError
 from hframe_id.models import parameter_specs
 from hframe_id.parameters import ParameterSet
@@ -427,17 +427,4 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, overwrite: bool = F
         raise OptionError(f"{path}: exists already; use --force to overwrite it")
     if not path.parent.is_dir():
         raise OptionError(f"{path}: directory {path.parent} does not exist")
-    payload = data.encode() if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        # mkstemp creates the file 0600; give the export the usual umask-based mode.
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(payload)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return replace_atomically(path, data)

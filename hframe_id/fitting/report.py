@@ -16,6 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from hframe_id.atomic import replace_atomically  # noqa: E402
 from hframe_id.fitting.fit import FitResult  # noqa: E402
 from hframe_id.fitting.problem import applied_inputs  # noqa: E402
 from hframe_id.models import build_model  # noqa: E402
@@ -230,5 +231,4 @@ def write_report(
         plot_correlation(result, png)
         lines += ["## Correlation", "", f"![correlation]({plots.name}/{png.name})", ""]
     path = out_dir / f"{fit_id}-report.md"
-    path.write_text("\n".join(lines))
-    return path
+    return replace_atomically(path, "\n".join(lines))

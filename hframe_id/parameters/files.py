@@ -26,7 +26,6 @@ from __future__ import annotations
 import difflib
 import math
 import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +33,7 @@ from typing import Any
 
 import yaml
 
+from hframe_id.atomic import replace_atomically
 from hframe_id.errors import ModelError, ParameterFileError
 from hframe_id.models import VARIANTS, parameter_specs
 
@@ -241,12 +241,4 @@ def save_parameter_file(
         raise ParameterFileError(f"{path}: exists already; refusing to overwrite it")
     text = yaml.safe_dump(to_document(params), sort_keys=False, allow_unicode=True, width=100)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return replace_atomically(path, text)
