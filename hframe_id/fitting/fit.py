@@ -46,6 +46,8 @@ PENALTY_COST_RTOL = 1e-3
 #: Tolerances of the intermediate stages (the last stage uses the options' step_tol):
 #: they only need to bring the iterate into the next stage's basin.
 INTERMEDIATE_STEP_TOL = 1e-4
+#: Relative standard error above which parameters are held together, not one at a time.
+HOPELESS_STD = 1.0
 INTERMEDIATE_DEFECT_TOL = 1.0
 
 
@@ -202,9 +204,8 @@ def fit_recordings(
     n_free = len(problem.free)
     theta = np.zeros(n_free)
     smoothing = problem.smoothing
-    schedule = options.smoothing_schedule
     stages: list[StageReport] = []
-    evaluations = 0
+    counter = {"evaluations": 0}
     if options.first_stage:
         regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
         # Keep the regression only if it fits the data better than the given start does
@@ -215,10 +216,56 @@ def fit_recordings(
             probe.evaluate(nodes, th, smoothing, velocity_hint=velocity).cost
             for th in (theta, regressed)
         ]
-        evaluations += 2
-        if np.isfinite(costs[1]) and costs[1] < costs[0]:
+        counter["evaluations"] += 2
+        used = bool(np.isfinite(costs[1]) and costs[1] < costs[0])
+        if used:
             theta = regressed
-        stages.append(_equation_error_report(time.perf_counter() - start, costs[1] < costs[0]))
+        stages.append(_equation_error_report(time.perf_counter() - start, used))
+    active = np.ones(n_free, dtype=bool)
+    state, gn = _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress)
+    held: dict[str, tuple[float, float, float]] = {}
+    stats = _stats(gn, state, problem)
+    for _ in range(n_free):
+        # Also when the stage did not converge: a sloppy direction (a parameter the data
+        # hardly determine) is the usual reason, and holding it lets the rest converge.
+        active_idx = np.flatnonzero(state.active)
+        worst = int(np.argmax(stats.relative_std))
+        if stats.relative_std[worst] <= options.identifiability_threshold:
+            break
+        # The worst first (fixing one of a collinear pair can identify the other), together
+        # with every parameter the data plainly do not determine (relative std > 100 %).
+        hold = {worst} | set(np.flatnonzero(stats.relative_std > HOPELESS_STD).tolist())
+        active = state.active.copy()
+        theta = state.theta.copy()
+        for k in sorted(hold):
+            index = int(active_idx[k])
+            held[problem.free_names[index]] = (
+                float(stats.relative_std[k]),
+                float(stats.relative_std_gn[k]),
+                float(stats.collinearity[k]),
+            )
+            active[index] = False
+            theta[index] = 0.0
+        if not active.any():
+            break
+        # Holding a parameter that had wandered along a sloppy valley moves the optimum of
+        # the others (its collinear partners compensate): solve again from the measured
+        # nodes, with the other parameters where they were.
+        state, gn = _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress)
+        stats = _stats(gn, state, problem)
+    gn.evaluations = counter["evaluations"]
+    return _result(problem, ms, gn, state, stages, stats, held, start)
+
+
+def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress):
+    """Output-error stages from ``theta``: moving windows (exact, penalty fallback), then
+    every window with uniform substeps. Returns the final solver state and solver."""
+    options = problem.options
+    smoothing = problem.smoothing
+    schedule = options.smoothing_schedule
+    nodes = nodes.copy()
+    theta = theta.copy()
+    ms.uniform_substeps = False
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
     # the stiff stretches at rest makes each evaluation several times cheaper.
     moving = ms.moving_windows(velocity, smoothing) if options.first_stage else np.arange(0)
@@ -226,12 +273,12 @@ def fit_recordings(
         sub = ms.subset(moving)
         gn_sub = GaussNewton(sub, progress)
         for use_penalty in (False, True):
-            # Fast path: exact continuity straight from the equation-error start. If that
-            # fails (a poor start), the fallback first relaxes continuity into a penalty.
+            # Fast path: exact continuity straight from the start. If that fails (a poor
+            # start), the fallback first relaxes continuity into a penalty.
             sub_state = SolverState(
                 nodes[moving].copy(),
                 theta.copy(),
-                np.ones(n_free, dtype=bool),
+                active.copy(),
                 velocity_hint=velocity[moving],
             )
             if use_penalty:
@@ -262,7 +309,7 @@ def fit_recordings(
                 )
             if stages[-1].converged:
                 break
-        evaluations += gn_sub.evaluations
+        counter["evaluations"] += gn_sub.evaluations
         theta = sub_state.theta
         known = np.zeros(ms.n_windows, dtype=bool)
         known[moving] = True
@@ -275,7 +322,8 @@ def fit_recordings(
         nodes = ms.fill_nodes(nodes, known, theta, smoothing)
     ms.uniform_substeps = True
     gn = GaussNewton(ms, progress)
-    state = SolverState(nodes, theta, np.ones(n_free, dtype=bool), velocity_hint=velocity)
+    gn.freeze_sloppy = True
+    state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
     stages.append(
         gn.run(
             state,
@@ -287,40 +335,8 @@ def fit_recordings(
             radius=0.5,
         )
     )
-    held: dict[str, tuple[float, float, float]] = {}
-    stats = _stats(gn, state, problem)
-    for _ in range(n_free):
-        # Also when the stage did not converge: a sloppy direction (a parameter the data
-        # hardly determine) is the usual reason, and holding it lets the rest converge.
-        active = np.flatnonzero(state.active)
-        worst = int(np.argmax(stats.relative_std))
-        if stats.relative_std[worst] <= options.identifiability_threshold:
-            break
-        index = int(active[worst])
-        held[problem.free_names[index]] = (
-            float(stats.relative_std[worst]),
-            float(stats.relative_std_gn[worst]),
-            float(stats.collinearity[worst]),
-        )
-        state.active[index] = False
-        state.theta[index] = 0.0
-        if not state.active.any():
-            break
-        stages.append(
-            gn.run(
-                state,
-                "continuity",
-                smoothing,
-                options.max_iterations,
-                options.step_tol,
-                options.defect_tol,
-                radius=0.1,
-                watchdog=False,
-            )
-        )
-        stats = _stats(gn, state, problem)
-    gn.evaluations += evaluations
-    return _result(problem, ms, gn, state, stages, stats, held, start)
+    counter["evaluations"] += gn.evaluations
+    return state, gn
 
 
 def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:

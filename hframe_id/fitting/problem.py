@@ -255,7 +255,7 @@ def build_problem(
         value = p0[names.index(name)]
         if not value > 0:
             raise FitError(
-                f"free parameter {name} starts at {value!r}; parameters are fitted in log "
+                f"free parameter {name} starts at {float(value)!r}; parameters are fitted in log "
                 f"scale, so a free one needs a start > 0 (give a small positive value)"
             )
         low, high = options.bounds.get(

@@ -43,9 +43,20 @@ MAX_PROX_SCALE = 1e4
 WATCHDOG_FACTOR = 10.0
 WATCHDOG_PATIENCE = 4
 WATCHDOG_MIN_RADIUS = 1e-2
+WATCHDOG_REVERTS = 2
+#: A stalled exact stage is accepted as converged if simulating from the initial states (exact
+#: continuity) costs at most this much more than the lifted iterate (chi^2 / 2 units).
+CLOSE_COST_TOL = 1.0
+#: ... and so is a stall with every continuity defect below this (noise std units).
+STALL_DEFECT_TOL = 2.0
+#: ... provided the fit is at the noise level (residual rms at most this many noise std):
+#: a stall far from a good fit is a failure, whatever the defects.
+STALL_NOISE_RATIO = 1.5
 #: Continuity stages accept their first steps unconditionally: they close the defects left
 #: by the previous stage, which raises the cost (and the merit) before it falls.
 FREE_STEPS = 2
+#: Textbook relative std (of log p) above which a parameter is not moved in an iteration.
+SLOPPY_STD = 0.5
 #: Floor of the Marquardt scaling, relative to the largest diagonal entry of the block.
 DIAG_FLOOR = 1e-9
 
@@ -118,6 +129,16 @@ def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.
     return step(hi), False
 
 
+def _determined(h_red: np.ndarray) -> np.ndarray:
+    """Parameters whose textbook relative std (from the reduced information, residuals in
+    noise units) is at most SLOPPY_STD."""
+    if h_red.size == 0:
+        return np.ones(0, dtype=bool)
+    d = np.sqrt(np.maximum(np.diag(h_red), 1e-300))
+    cov = np.linalg.pinv(h_red / np.outer(d, d), rcond=1e-12, hermitian=True) / np.outer(d, d)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)) <= SLOPPY_STD
+
+
 def _window_costs(ev: Evaluation) -> np.ndarray:
     return 0.5 * np.sum(ev.residual**2, axis=(1, 2))
 
@@ -134,6 +155,9 @@ class GaussNewton:
         self.prox_unit = np.zeros(shooting.nx)
         self.prox_scale = 1.0
         self.node_damping = NODE_DAMPING
+        #: Hold undetermined parameters still (final stages, where the iterate is near an
+        #: optimum; far from it a parameter can look undetermined only transiently).
+        self.freeze_sloppy = False
 
     def set_smoothing(self, smoothing, proximal: bool = True):
         """Proximal weight on node velocity steps: a step of one smoothing velocity costs as
@@ -223,6 +247,7 @@ class GaussNewton:
                 np.sum(r_all * jd + 0.5 * jd * jd, axis=1),
                 np.sum(r_all * jd_theta + 0.5 * jd_theta * jd_theta, axis=1),
             )
+            self.model_terms = (float(np.sum(r_all * jd)), float(np.sum(jd * jd)))
             return dnodes, float(np.sum(r_all * jd) + 0.5 * np.sum(jd * jd))
 
         return h_red, g_red, complete
@@ -355,6 +380,23 @@ class GaussNewton:
 
         return h_red, g_red, complete
 
+    def _close_by_simulation(self, state: SolverState, ev: Evaluation, smoothing, merit_now):
+        """At a stall with small defects left (typically velocities at rest, where closing
+        them is nonlinear), replace the nodes by one simulation per experiment from its
+        initial state. If that continuous trajectory fits as well as the lifted iterate
+        (cost within ``CLOSE_COST_TOL``, in units of chi^2 / 2), it is the solution."""
+        ms = self.ms
+        known = np.zeros(ms.n_windows, dtype=bool)
+        known[np.flatnonzero(np.r_[True, ~self.links])] = True
+        nodes = ms.fill_nodes(state.nodes, known, state.theta, smoothing)
+        trial = self._evaluate(state, nodes, state.theta, smoothing)
+        if not np.isfinite(trial.cost) or trial.cost > merit_now + CLOSE_COST_TOL:
+            return None
+        state.nodes = nodes
+        state.evaluation = trial
+        state.velocity_hint = trial.states[:, :, ms.nq :]
+        return trial
+
     # ------------------------------------------------------------------ driver
     def run(
         self,
@@ -410,6 +452,7 @@ class GaussNewton:
         # Exact stages start with the watchdog; once it has had to step back, they continue
         # as a monotone trust-region method (so they cannot cycle).
         monotone = windows or penalty is not None or not watchdog
+        reverts = 0
         since_best = 0
         for iterations in range(1, max_iterations + 1):
             accepted = False
@@ -430,8 +473,12 @@ class GaussNewton:
                             ev, state.nodes, free, penalty
                         )
                     damping_used = key
+                # Parameters the data do not determine at all (textbook relative std above
+                # SLOPPY_STD) are not moved: along such directions Gauss-Newton steps are
+                # arbitrary and can take the model somewhere stiff and ill-conditioned. The
+                # identifiability step later holds them at their initial value.
+                sub = _determined(h_red) if self.freeze_sloppy else np.ones(len(index), dtype=bool)
                 # Hold parameters at a bound whose step points outward, then clip.
-                sub = np.ones(len(index), dtype=bool)
                 for _ in range(len(index) + 1):
                     d_sub, full_step = _trust_region_step(
                         h_red[np.ix_(sub, sub)], g_red[sub], radius
@@ -506,6 +553,31 @@ class GaussNewton:
                     # single steps sane, so it must not shrink to nothing over noise-level
                     # merit changes near the optimum.
                     radius = max(radius, WATCHDOG_MIN_RADIUS)
+                if (
+                    monotone
+                    and not windows
+                    and penalty is None
+                    and not (np.isfinite(new) and ratio > 1e-4)
+                ):
+                    # The defect-closing part of the step is not limited by the trust region
+                    # (it is not a parameter step): shorten the whole step instead.
+                    rjd, jdjd = self.model_terms
+                    d2 = 2 * (current - ev.cost)  # |defects|^2 in the merit
+                    for alpha in (0.5, 0.25, 0.125):
+                        nodes_a = state.nodes + alpha * dnodes
+                        theta_a = state.theta + alpha * dtheta
+                        trial_a = self._evaluate(state, nodes_a, theta_a, smoothing)
+                        new_a = merit(trial_a, nodes_a)
+                        model = ev.cost + alpha * rjd + 0.5 * alpha**2 * jdjd
+                        predicted_a = current - (model + 0.5 * (1 - alpha) ** 2 * d2)
+                        if (
+                            np.isfinite(new_a)
+                            and predicted_a > 0
+                            and ((current - new_a) / predicted_a > 1e-4)
+                        ):
+                            trial, new, ratio = trial_a, new_a, 0.5
+                            nodes_new, theta_new, d = nodes_a, theta_a, alpha * d
+                            break
                 if monotone:
                     ok = np.isfinite(new) and ratio > 1e-4
                 elif iterations <= FREE_STEPS:
@@ -536,7 +608,10 @@ class GaussNewton:
                     state.evaluation = ev
                     state.velocity_hint = ev.states[:, :, ms.nq :]
                     radius = max(0.1 * step, WATCHDOG_MIN_RADIUS)
-                    monotone = True
+                    reverts += 1
+                    # A second return to the same best point would start a cycle: from
+                    # then on the stage is a monotone trust-region method.
+                    monotone = reverts >= WATCHDOG_REVERTS
                     since_best = 0
                     full_step = False
             max_defect = float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0))
@@ -553,14 +628,38 @@ class GaussNewton:
                     )
                 )
             if not accepted:
-                converged = abs(predicted) <= 1e-10 * max(ev.cost, 1.0) and (
-                    max_defect <= defect_tol
+                # No step decreases the merit. That is convergence if the model predicted
+                # (almost) nothing, or if all that is left are continuity defects below the
+                # noise (typically a velocity at rest, where closing is nonlinear in v_s).
+                n_valid = max(int(np.count_nonzero(ms.weight)), 1)
+                at_noise_level = 2 * ev.cost / n_valid <= STALL_NOISE_RATIO**2
+                converged = (
+                    abs(predicted) <= 1e-10 * max(ev.cost, 1.0) and max_defect <= defect_tol
+                ) or (
+                    not windows
+                    and penalty is None
+                    and max_defect <= STALL_DEFECT_TOL
+                    and at_noise_level
                 )
                 message = (
-                    "converged (no further decrease possible)"
+                    "converged: no further decrease possible (largest continuity defect "
+                    f"{max_defect:.2g} noise std)"
                     if converged
                     else "stalled: no step decreases the cost"
                 )
+                if not converged and not windows and penalty is None:
+                    closed = self._close_by_simulation(state, ev, smoothing, current)
+                    if closed is not None:
+                        ev = closed
+                        max_defect = float(
+                            np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0)
+                        )
+                        converged = max_defect <= defect_tol
+                        message = (
+                            "converged: no step decreases the cost; continuity closed by "
+                            "simulating from the initial states (cost within "
+                            f"{CLOSE_COST_TOL:g} of the multiple-shooting optimum)"
+                        )
                 break
             if cost_rtol > 0 and 0 <= previous_cost - ev.cost <= cost_rtol * ev.cost:
                 converged = True
