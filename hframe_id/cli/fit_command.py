@@ -125,10 +125,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-first-stage",
         action="store_true",
-        help="skip the stage of independent windows (continuity dropped)",
+        help="skip the equation-error start and the stages on the moving windows (start the "
+        "full multiple-shooting problem directly from --initial)",
     )
     parser.add_argument(
-        "--max-iterations", type=int, default=60, help="Gauss-Newton iterations per stage"
+        "--max-iterations",
+        type=int,
+        default=FitOptions.max_iterations,
+        help="Gauss-Newton iterations per stage",
     )
     parser.add_argument(
         "--step-tol",

@@ -4,16 +4,18 @@ The chain (PyBOP-style plain objects): recordings -> :class:`FitProblem` (checke
 :class:`MultipleShooting` (transcription) -> :class:`GaussNewton` (solver, stages) ->
 :mod:`statistics` (covariance, identifiability) -> :class:`FitResult`.
 
-Stages (see ``docs/fitting.md`` for the measurements behind them):
+Stages (``docs/fitting.md`` has the measurements behind each choice):
 
-1. independent windows sharing the parameters (no continuity), at the first smoothing of
-   the continuation schedule: every window is a short fit from a node that starts at the
-   measurements, so a start off by factors of 3 cannot drift away from the data;
-2. full continuity (condensed Gauss-Newton) at each smoothing of the schedule, the last being
-   the model's;
-3. statistics at the optimum; a free parameter whose relative standard error exceeds the
-   identifiability threshold is held at its initial value and stage 2 re-run, one parameter
-   at a time (the worst first, since fixing one of a collinear pair identifies the other).
+1. equation error: the models are linear in their parameters once multiplied by the mass
+   matrix, so a regression on differentiated measurements gives a start in milliseconds
+   (kept only if it fits the data better than the given start);
+2. multiple shooting on the windows where something moves (the dynamics; the stiff stretches
+   at rest cost most and tell least): exact continuity by condensed Gauss-Newton, or, if that
+   fails from a poor start, first continuity as a penalty, then exact;
+3. every window, every sample with the substeps the stiffest window needs (the discretization
+   of a simulation), nodes at rest filled by simulating the fitted model;
+4. statistics at the optimum; free parameters whose relative standard error exceeds the
+   identifiability threshold are held at their initial value and stages 2-3 re-run.
 """
 
 from __future__ import annotations

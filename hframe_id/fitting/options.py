@@ -63,10 +63,15 @@ class FitOptions:
     shooting_interval : samples per shooting window (a node every this many samples).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
         the model's (1e-3 m/s, 1e-2 rad/s).
-    smoothing_schedule : continuation: factors applied to ``smoothing`` stage by stage,
-        decreasing, ending with 1 (default 10 then 1).
-    first_stage : start with independent windows sharing the parameters (no continuity),
-        which makes starts off by factors of 3 converge (notes: 5-7 of 10 without it).
+    smoothing_schedule : continuation: factors applied to ``smoothing`` in the stages on the
+        moving windows, decreasing, ending with 1. Default (1,): measured on this problem,
+        a wider smoothing is a different model (a motor creeps under sub-Coulomb torque) that
+        cannot follow the records at rest, and it did not make starts converge more often
+        (docs/fitting.md).
+    first_stage : start with the equation-error regression and the stages on the moving
+        windows (see ``hframe_id.fitting.fit``); without them the full multiple-shooting
+        problem starts from the initial parameters and measured nodes (converges only from
+        good starts).
     max_iterations : Gauss-Newton iterations per stage.
     step_tol : converged when no free parameter changes by more than this relative amount
         (and the continuity defects are below ``defect_tol``). 1e-7 is four orders below
