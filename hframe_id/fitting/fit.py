@@ -48,6 +48,8 @@ PENALTY_COST_RTOL = 1e-3
 #: Tolerances of the intermediate stages (the last stage uses the options' step_tol):
 #: they only need to bring the iterate into the next stage's basin.
 INTERMEDIATE_STEP_TOL = 1e-4
+#: Residual rms (noise std) above which an unconverged fit is not worth holding parameters.
+MISFIT = 1.5
 #: Relative standard error above which parameters are held together, not one at a time.
 HOPELESS_STD = 1.0
 INTERMEDIATE_DEFECT_TOL = 1.0
@@ -228,8 +230,12 @@ def fit_recordings(
     held: dict[str, tuple[float, float, float]] = {}
     stats = _stats(gn, state, problem)
     for _ in range(n_free):
-        # Also when the stage did not converge: a sloppy direction (a parameter the data
-        # hardly determine) is the usual reason, and holding it lets the rest converge.
+        # Also when the stage did not converge, if the fit is at the noise level: a sloppy
+        # direction (a parameter the data hardly determine) is the usual reason, and holding
+        # it lets the rest converge. Far from a fit, error estimates mean nothing: fail.
+        n_valid = max(int(np.count_nonzero(ms.weight)), 1)
+        if not stages[-1].converged and 2 * state.evaluation.cost / n_valid > MISFIT**2:
+            break
         active_idx = np.flatnonzero(state.active)
         worst = int(np.argmax(stats.relative_std))
         if stats.relative_std[worst] <= options.identifiability_threshold:
