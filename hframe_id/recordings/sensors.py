@@ -82,7 +82,11 @@ class SensorModel:
         return self.encoder_step_rad / math.sqrt(12)
 
     def as_metadata(self) -> dict[str, float | int]:
-        return asdict(self)
+        """The sensor fields of the ``rig`` metadata record, in the log format's order."""
+        order = ("encoder_counts_per_rev", "dac_bits", "dac_min_v", "dac_max_v",
+                 "laser_min_m", "laser_max_m", "laser_noise_std_m")  # fmt: skip
+        values = asdict(self)
+        return {name: values[name] for name in order}
 
     def dac_code(self, volts: np.ndarray) -> np.ndarray:
         """DAC codes (integers 0 .. 2^bits - 1) of commanded voltages, clamped to the range."""
