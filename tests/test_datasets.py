@@ -99,6 +99,12 @@ def test_regenerating_gives_the_same_recordings(tmp_path):
         np.testing.assert_array_equal(made.valid, shipped.valid)
         assert made.rig == shipped.rig
         assert made.experiment == shipped.experiment
+        # README promises byte-identical regeneration (metadata key order included).
+        made_bytes, shipped_bytes = (
+            (tmp_path / name).read_bytes(),
+            (DATASETS_DIR / name).read_bytes(),
+        )
+        assert made_bytes == shipped_bytes
 
 
 def test_datasets_commands(capsys):
