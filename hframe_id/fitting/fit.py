@@ -271,6 +271,7 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
     options = problem.options
     smoothing = problem.smoothing
     schedule = options.smoothing_schedule
+    measured = nodes
     nodes = nodes.copy()
     theta = theta.copy()
     ms.uniform_substeps = False
@@ -331,18 +332,39 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
     ms.uniform_substeps = True
     gn = GaussNewton(ms, progress)
     gn.freeze_sloppy = True
-    state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
-    stages.append(
-        gn.run(
-            state,
-            "continuity",
-            smoothing,
-            options.max_iterations,
-            options.step_tol,
-            options.defect_tol,
-            radius=0.5,
+    # Exact continuity from the nodes so far; if that fails (nodes at rest simulated with
+    # parameters that are still off, e.g. an unmeasured pulley's stretch at rest), the same
+    # fallback as above from the measured nodes: continuity first as a penalty, then exact.
+    for use_penalty in (False, True):
+        start_nodes = measured if use_penalty else nodes
+        state = SolverState(start_nodes.copy(), theta.copy(), active.copy(), velocity_hint=velocity)
+        if use_penalty:
+            stages.append(
+                gn.run(
+                    state,
+                    "continuity",
+                    smoothing,
+                    options.max_iterations,
+                    INTERMEDIATE_STEP_TOL,
+                    math.inf,
+                    cost_rtol=PENALTY_COST_RTOL,
+                    radius=1.0,
+                    penalty=PENALTY_WEIGHT,
+                )
+            )
+        stages.append(
+            gn.run(
+                state,
+                "continuity",
+                smoothing,
+                options.max_iterations,
+                options.step_tol,
+                options.defect_tol,
+                radius=0.5,
+            )
         )
-    )
+        if stages[-1].converged:
+            break
     counter["evaluations"] += gn.evaluations
     return state, gn
 

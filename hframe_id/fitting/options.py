@@ -21,6 +21,13 @@ from hframe_id.errors import OptionError
 #: the difference between the two amplifiers (section 4.3).
 DEFAULT_FIXED = ("r", "K_t", "K_e", "R", "g_1", "l_l0", "l_r0", "l_b0")
 
+#: Further parameters held by default per variant, because the standard outputs do not
+#: identify them. one-axis: the idler pulley (phi3) is not measured; its inertia and friction
+#: act on the drive only through the belt and are collinear with the motor's and the cart's
+#: (collinearity indices 1e3-4e4, measured on the shipped 5 V + 10 V pulses): with them free
+#: the fit wanders along the valley and stalls (docs/fitting.md, "one-axis").
+VARIANT_FIXED = {"one-axis": ("J_2", "B_2", "tau_c2")}
+
 UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 
 
@@ -52,7 +59,8 @@ class FitOptions:
     ----------
     free : parameter names or fnmatch patterns (``"k_*"``) to fit; ``None`` selects the
         variant's default: every stiffness, inertia, mass, viscous and Coulomb friction
-        parameter and g_2 (everything but ``DEFAULT_FIXED``).
+        parameter and g_2 (everything but ``DEFAULT_FIXED`` and the variant's
+        ``VARIANT_FIXED``: one-axis holds the unmeasured idler's J_2, B_2, tau_c2).
     fix : names or patterns removed from the free set (applied after ``free``).
     bounds : ``{name: (low, high)}`` in SI units for free parameters. Default: the initial
         value divided and multiplied by ``bound_factor``.

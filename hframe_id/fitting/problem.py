@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.options import DEFAULT_FIXED, FitOptions
+from hframe_id.fitting.options import DEFAULT_FIXED, VARIANT_FIXED, FitOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -111,8 +111,10 @@ def _expand(patterns: Sequence[str], names: Sequence[str], what: str) -> list[st
 
 
 def default_free(model: Model) -> list[str]:
-    """Every stiffness, inertia, mass, friction parameter and g_2 (not ``DEFAULT_FIXED``)."""
-    return [name for name in model.parameter_names if name not in DEFAULT_FIXED]
+    """Every stiffness, inertia, mass, friction parameter and g_2 (not ``DEFAULT_FIXED``,
+    nor the variant's ``VARIANT_FIXED``: one-axis holds the unmeasured idler pulley)."""
+    fixed = DEFAULT_FIXED + VARIANT_FIXED.get(model.variant, ())
+    return [name for name in model.parameter_names if name not in fixed]
 
 
 def resolve_free(model: Model, options: FitOptions) -> list[str]:
