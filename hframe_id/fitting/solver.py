@@ -1,15 +1,14 @@
 """Gauss-Newton (Levenberg-Marquardt) on the lifted multiple-shooting problem.
 
-Two kinds of stage, on the same evaluation (``MultipleShooting.evaluate``):
+One kind of stage, ``continuity``, on ``MultipleShooting.evaluate``, in two forms:
 
-- ``windows``: every window is an independent short fit sharing the parameters (continuity
-  dropped). The normal equations are block-arrow shaped; the node blocks (n_x x n_x each)
-  are eliminated by a Schur complement, leaving a solve the size of the free parameters.
-- ``continuity``: the continuity conditions x_end(node_i, theta) = node_{i+1} are linearised
+- exact: the continuity conditions x_end(node_i, theta) = node_{i+1} are linearised
   and condensed (Bock): node steps become affine in each experiment's first node step and
   the parameter step, ds_{i+1} = d_i + A_i ds_i + B_i dtheta, so each iteration solves a
   dense system of n_x * experiments + n_free unknowns. The nonlinear defects close as the
-  iteration converges; an l1 merit function with an adaptive penalty globalises the step.
+  iteration converges; a watchdog on the merit globalises the step.
+- penalty: continuity as weighted residuals (block-tridiagonal normal equations, monotone
+  trust region), a fallback that takes a poor start into the exact form's basin.
 
 Parameters stay within their bounds by projection: a parameter at a bound whose step points
 outward is held for that iteration.
@@ -139,10 +138,6 @@ def _determined(h_red: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(cov), 0.0)) <= SLOPPY_STD
 
 
-def _window_costs(ev: Evaluation) -> np.ndarray:
-    return 0.5 * np.sum(ev.residual**2, axis=(1, 2))
-
-
 class GaussNewton:
     """Iterates the stages of the lifted problem."""
 
@@ -226,8 +221,6 @@ class GaussNewton:
         g_p = ge[:, nx:].sum(axis=0)
         # Eliminate the segments' first-node steps (block diagonal) by a Schur complement.
         damping = self.node_damping
-        if np.ndim(damping):  # per window (independent windows: one window per segment)
-            damping = damping[np.flatnonzero(np.r_[True, ~links])]
         h_ss_d = _damped(h_ss, damping) + np.diag(self.prox)
         k = np.linalg.solve(h_ss_d, np.concatenate([h_sp, g_s[:, :, None]], axis=2))
         k_sp, k_g = k[:, :, :-1], k[:, :, -1]
@@ -242,11 +235,6 @@ class GaussNewton:
             jd_theta = np.einsum("wri,i->wr", jp_all, dtheta_free)
             jd = np.einsum("wri,wi->wr", js_all, dnodes) + jd_theta
             # Change of the cost along the step to second order; the defects close (linearly).
-            # Per window too, with and without the window's node step (for the windows stage).
-            self.window_change = (
-                np.sum(r_all * jd + 0.5 * jd * jd, axis=1),
-                np.sum(r_all * jd_theta + 0.5 * jd_theta * jd_theta, axis=1),
-            )
             self.model_terms = (float(np.sum(r_all * jd)), float(np.sum(jd * jd)))
             return dnodes, float(np.sum(r_all * jd) + 0.5 * np.sum(jd * jd))
 
@@ -345,7 +333,7 @@ class GaussNewton:
         grad[1:] -= mu[:-1, None] * inv[None, :] * d[:-1]
         h_pp = np.einsum("wri,wrj->ij", jp, jp) + np.einsum("w,wki,wkj->ij", mu, b, b)
         g_p = np.einsum("wri,wr->i", jp, r) + np.einsum("w,wki,wk->i", mu, b, d)
-        diag_d = _damped(diag, np.max(self.node_damping)) + np.diag(self.prox)[None]
+        diag_d = _damped(diag, self.node_damping) + np.diag(self.prox)[None]
         # Block Thomas: solve H_ss X = [cross, grad] for all right-hand sides at once.
         rhs = np.concatenate([cross, grad[:, :, None]], axis=2)
         c_prime = np.empty((w, nx, nx))
@@ -407,16 +395,15 @@ class GaussNewton:
         step_tol: float,
         defect_tol: float,
         cost_rtol: float = 0.0,
-        segment_windows: int | None = None,
         radius: float = 0.5,
         penalty: float | None = None,
         watchdog: bool = True,
     ) -> StageReport:
         """Iterate one stage until converged; updates ``state`` in place.
 
-        ``stage`` is ``"windows"`` (chains cut every ``segment_windows`` windows; monotone
-        trust-region Gauss-Newton) or ``"continuity"`` (every window of an experiment linked;
-        nearly full Gauss-Newton steps under a watchdog, see the module docstring).
+        ``stage`` names the stage in progress reports. Exact continuity (``penalty`` None):
+        nearly full Gauss-Newton steps under a watchdog (see the module docstring); with
+        ``penalty``: continuity as weighted residuals, monotone trust region.
 
         Converged: the last step was a full Gauss-Newton step (trust region inactive) that
         changed no free parameter by more than ``step_tol`` (relative), and the continuity
@@ -425,15 +412,9 @@ class GaussNewton:
         """
         start = time.perf_counter()
         ms = self.ms
-        windows = stage == "windows"
-        # Independent windows get a damping each (their node steps are accepted or
-        # rejected window by window); chained windows share one.
-        self.node_damping = np.full(ms.n_windows, NODE_DAMPING) if windows else NODE_DAMPING
+        self.node_damping = NODE_DAMPING
         self.set_smoothing(smoothing, proximal=True)
         self.links = ms.linked.copy()
-        if windows:
-            cut = segment_windows or 1
-            self.links &= (ms.window_index_in_experiment[1:] % cut) != 0
         lo, hi = self.problem.log_lower, self.problem.log_upper
         ms.frozen_substeps = None
         ev = self._evaluate(state, state.nodes, state.theta, smoothing)
@@ -451,7 +432,7 @@ class GaussNewton:
         best = (merit(ev, state.nodes), state.nodes, state.theta, ev)
         # Exact stages start with the watchdog; once it has had to step back, they continue
         # as a monotone trust-region method (so they cannot cycle).
-        monotone = windows or penalty is not None or not watchdog
+        monotone = penalty is not None or not watchdog
         reverts = 0
         since_best = 0
         for iterations in range(1, max_iterations + 1):
@@ -463,8 +444,8 @@ class GaussNewton:
             free = state.active.copy()
             index = np.flatnonzero(free)
             damping_used = None
-            while radius >= MIN_RADIUS and np.min(self.node_damping) <= MAX_NODE_DAMPING:
-                key = (np.sum(np.log(self.node_damping)), self.prox_scale)
+            while radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
+                key = (self.node_damping, self.prox_scale)
                 if damping_used != key:
                     if penalty is None:
                         h_red, g_red, complete = self._linearize(ev, state.nodes, free)
@@ -505,29 +486,6 @@ class GaussNewton:
                 else:
                     predicted = -change
                 trial = self._evaluate(state, nodes_new, theta_new, smoothing)
-                if windows:
-                    # Windows are independent: keep the old node where a window got worse
-                    # (its step left the region where the linear model holds), and damp it.
-                    worse = _window_costs(trial) > _window_costs(ev)
-                    worse |= ~np.isfinite(_window_costs(trial))
-                    if worse.any():
-                        nodes_new = np.where(worse[:, None], state.nodes, nodes_new)
-                        trial = self.ms.evaluate(
-                            nodes_new,
-                            theta_new,
-                            smoothing,
-                            state.velocity_hint,
-                            windows=np.flatnonzero(worse),
-                            base=trial,
-                        )
-                        self.evaluations += 1
-                    self.node_damping = np.where(
-                        worse,
-                        self.node_damping * 10.0,
-                        np.maximum(self.node_damping / 3.0, NODE_DAMPING),
-                    )
-                    full, theta_only = self.window_change
-                    predicted = -float(np.sum(np.where(worse, theta_only, full)))
                 new = merit(trial, nodes_new)
                 ratio = (current - new) / predicted if predicted > 0 else -1.0
                 if abs(predicted) <= 1e-9 * (abs(current) + 1.0) and new <= current:
@@ -539,12 +497,10 @@ class GaussNewton:
                 length = float(np.linalg.norm(d))
                 if not np.isfinite(new) or ratio < 0.25:
                     radius = 0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * radius
-                    if not windows:
-                        self.node_damping *= 10.0
+                    self.node_damping *= 10.0
                     self.prox_scale = min(self.prox_scale * 10.0, MAX_PROX_SCALE)
                 elif ratio > 0.75:
-                    if not windows:
-                        self.node_damping = max(NODE_DAMPING, self.node_damping / 10.0)
+                    self.node_damping = max(NODE_DAMPING, self.node_damping / 10.0)
                     self.prox_scale = max(self.prox_scale / 4.0, MIN_PROX_SCALE)
                     if length >= 0.9 * radius:
                         radius = min(2 * radius, MAX_RADIUS)
@@ -553,12 +509,7 @@ class GaussNewton:
                     # single steps sane, so it must not shrink to nothing over noise-level
                     # merit changes near the optimum.
                     radius = max(radius, WATCHDOG_MIN_RADIUS)
-                if (
-                    monotone
-                    and not windows
-                    and penalty is None
-                    and not (np.isfinite(new) and ratio > 1e-4)
-                ):
+                if monotone and penalty is None and not (np.isfinite(new) and ratio > 1e-4):
                     # The defect-closing part of the step is not limited by the trust region
                     # (it is not a parameter step): shorten the whole step instead.
                     rjd, jdjd = self.model_terms
@@ -635,19 +586,14 @@ class GaussNewton:
                 at_noise_level = 2 * ev.cost / n_valid <= STALL_NOISE_RATIO**2
                 converged = (
                     abs(predicted) <= 1e-10 * max(ev.cost, 1.0) and max_defect <= defect_tol
-                ) or (
-                    not windows
-                    and penalty is None
-                    and max_defect <= STALL_DEFECT_TOL
-                    and at_noise_level
-                )
+                ) or (penalty is None and max_defect <= STALL_DEFECT_TOL and at_noise_level)
                 message = (
                     "converged: no further decrease possible (largest continuity defect "
                     f"{max_defect:.2g} noise std)"
                     if converged
                     else "stalled: no step decreases the cost"
                 )
-                if not converged and not windows and penalty is None:
+                if not converged and penalty is None:
                     closed = self._close_by_simulation(state, ev, smoothing, current)
                     if closed is not None:
                         ev = closed
