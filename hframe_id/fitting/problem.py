@@ -238,12 +238,18 @@ def build_problem(
     _check_rigs(recordings)
     if not isinstance(initial, ParameterSet):
         raise FitError(f"initial must be a ParameterSet, got {type(initial).__name__}")
-    if initial.variant != recordings[0].variant:
-        raise FitError(
-            f"initial parameters are for {initial.variant} but the recordings are "
-            f"{recordings[0].variant} data ({recordings[0].name()})"
-        )
     model = build_model(initial.variant)
+    if initial.variant != recordings[0].variant:
+        # A different model of the same rig is fine if it has the same inputs and outputs
+        # (hframe-20 on hframe-8 records: phi1, phi2, x, y from u1, u2).
+        rec = recordings[0]
+        if tuple(rec.input_names) != tuple(s.name for s in model.inputs) or not set(
+            s.name for s in model.outputs
+        ) <= set(rec.output_names):
+            raise FitError(
+                f"initial parameters are for {initial.variant} but the recordings are "
+                f"{rec.variant} data ({rec.name()}), with other inputs or outputs"
+            )
     p0 = model.parameter_vector(initial.values)
     names = list(model.parameter_names)
     free_names = resolve_free(model, options)
