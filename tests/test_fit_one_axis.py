@@ -49,3 +49,23 @@ def test_shipped_pulses_recover_friction_inertia_and_belts_within_2_percent(fit)
         if est.free:
             assert est.estimate == pytest.approx(truth.values[name], rel=0.02), name
             assert est.identified, name
+
+
+def test_fresh_plant_started_at_the_truth_stays_there():
+    """A fresh simulated plant (study seed 6: the default free set x/÷1.3 off Table 2.3,
+    standard one-axis pulses, rig sensors), started at the truth (x/÷1.0001).
+
+    Before the state-estimation pre-pass (node states of the unmeasured idler estimated with
+    the parameters held) only seeds 1 and 3 of 0-4 stayed at the truth. With it, 10 of 10
+    seeds converge from the truth, worst errors 0.9-2.6 % (F_c, the cart's Coulomb friction
+    seen only while the laser is valid, on 9 of 10). Seed 6 (worst 0.98 %, F_c) is asserted
+    within 2 %, issue 5's target. Starts off by x3 still mostly fail (docs/fitting.md,
+    "One-axis"), so they are not asserted. Measured ~5 s.
+    """
+    from hframe_id.fitting.study import run_trial
+
+    trial = run_trial("one-axis", 6, start_factor=1.0001)
+    print(trial.errors, trial.stages)
+    assert trial.success, trial.message
+    for name, error in trial.errors.items():
+        assert abs(error) < 0.02, (name, error)

@@ -16,6 +16,10 @@ Stages (``docs/fitting.md`` has the measurements behind each choice):
    of a simulation), nodes at rest filled by simulating the fitted model;
 4. statistics at the optimum; free parameters whose relative standard error exceeds the
    identifiability threshold are held at their initial value and stages 2-3 re-run.
+
+A model with a coordinate no output measures (one-axis: the idler) first tries all this with
+the node states estimated at the parameters held (a state-estimation pre-pass), and if that
+does not converge, again from the measured nodes.
 """
 
 from __future__ import annotations
@@ -53,6 +57,8 @@ MISFIT = 1.5
 #: Relative standard error above which parameters are held together, not one at a time.
 HOPELESS_STD = 1.0
 INTERMEDIATE_DEFECT_TOL = 1.0
+#: Iterations of the state-estimation pre-pass (nodes only, parameters held).
+PREPASS_ITERATIONS = 30
 
 
 @dataclass(frozen=True)
@@ -205,28 +211,68 @@ def fit_recordings(
     ms = MultipleShooting(problem)
     progress = _progress_sink(options)
     nodes, velocity = ms.initial_nodes(problem.p_initial)
+    stages: list[StageReport] = []
+    counter = {"evaluations": 0}
+    # One-axis (a coordinate no output measures): first with the node states estimated at
+    # the parameters held (converges from the truth on fresh plants, where the path from the
+    # measured nodes left it); if that fails, the path from the measured nodes (which fits
+    # the shipped pulses from Table 2.3, where the pre-pass path stalled). docs/fitting.md.
+    attempts = [False]
+    if _unmeasured_coordinates(ms) and options.state_prepass:
+        attempts.insert(0, True)
+    best = None
+    for prepass in attempts:
+        outcome = _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass)
+        state, gn, stats, held = outcome
+        if stages[-1].converged:
+            best = outcome
+            break
+        if best is None or state.evaluation.cost < best[0].evaluation.cost:
+            best = outcome
+    state, gn, stats, held = best
+    gn.evaluations = counter["evaluations"]
+    return _result(problem, ms, gn, state, stages, stats, held, start)
+
+
+def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
+    """Equation-error start, output-error stages and the identifiability holds, from the
+    given start (with the state-estimation pre-pass if ``prepass``)."""
+    options = problem.options
+    start = time.perf_counter()
     n_free = len(problem.free)
     theta = np.zeros(n_free)
     smoothing = problem.smoothing
-    stages: list[StageReport] = []
-    counter = {"evaluations": 0}
+    ms.uniform_substeps = False
     if options.first_stage:
         regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
         # Keep the regression only if it fits the data better than the given start does
         # (both judged by the output error of independent shooting windows: one evaluation
         # each). It is biased and can be poor where a coordinate is not measured.
-        probe = ms.subset(np.arange(ms.n_windows), linked=False)
-        costs = [
-            probe.evaluate(nodes, th, smoothing, velocity_hint=velocity).cost
-            for th in (theta, regressed)
-        ]
+        if prepass:
+            # Judged after estimating the node states at each: from the measured nodes (an
+            # unmeasured coordinate on the rigid motion) the truth itself can lose to a
+            # poorer regression (one-axis, seed 0 of the study).
+            active0 = np.ones(n_free, dtype=bool)
+            trials = [
+                _estimate_states(ms, nodes, velocity, th, active0, [], progress)
+                for th in (theta, regressed)
+            ]
+            costs = [merit for _, merit in trials]
+        else:
+            probe = ms.subset(np.arange(ms.n_windows), linked=False)
+            costs = [
+                probe.evaluate(nodes, th, smoothing, velocity_hint=velocity).cost
+                for th in (theta, regressed)
+            ]
         counter["evaluations"] += 2
         used = bool(np.isfinite(costs[1]) and costs[1] < costs[0])
         if used:
             theta = regressed
         stages.append(_equation_error_report(time.perf_counter() - start, used))
     active = np.ones(n_free, dtype=bool)
-    state, gn = _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress)
+    state, gn = _solve(
+        problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass
+    )
     held: dict[str, tuple[float, float, float]] = {}
     stats = _stats(gn, state, problem)
     for _ in range(n_free):
@@ -259,22 +305,25 @@ def fit_recordings(
         # Holding a parameter that had wandered along a sloppy valley moves the optimum of
         # the others (its collinear partners compensate): solve again from the measured
         # nodes, with the other parameters where they were.
-        state, gn = _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress)
+        state, gn = _solve(
+            problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass
+        )
         stats = _stats(gn, state, problem)
-    gn.evaluations = counter["evaluations"]
-    return _result(problem, ms, gn, state, stages, stats, held, start)
+    return state, gn, stats, held
 
 
-def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress):
+def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass=False):
     """Output-error stages from ``theta``: moving windows (exact, penalty fallback), then
     every window with uniform substeps. Returns the final solver state and solver."""
     options = problem.options
     smoothing = problem.smoothing
     schedule = options.smoothing_schedule
-    measured = nodes
-    nodes = nodes.copy()
     theta = theta.copy()
     ms.uniform_substeps = False
+    if prepass:
+        nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
+    measured = nodes
+    nodes = nodes.copy()
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
     # the stiff stretches at rest makes each evaluation several times cheaper.
     moving = ms.moving_windows(velocity, smoothing) if options.first_stage else np.arange(0)
@@ -367,6 +416,39 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
             break
     counter["evaluations"] += gn.evaluations
     return state, gn
+
+
+def _unmeasured_coordinates(ms: MultipleShooting) -> bool:
+    """Whether some coordinate is measured by no output (one-axis: the idler pulley)."""
+    seen = np.any(ms.c[:, : ms.nq] != 0, axis=0)
+    return not bool(np.all(seen))
+
+
+def _estimate_states(ms, nodes, velocity, theta, active, stages, progress):
+    """State-estimation pre-pass: the node states with the parameters held at ``theta``.
+
+    The nodes from the data put unmeasured coordinates (and lasers out of range) on the
+    rigid motion (belts unstretched); the continuity defects that leaves make the first
+    Gauss-Newton steps in the parameters large (0.3-0.4 in log p even at the truth). Here
+    continuity is a penalty and only the nodes move; the parameters are released after.
+    """
+    gn = GaussNewton(ms, progress)
+    state = SolverState(nodes.copy(), theta.copy(), np.zeros_like(active), velocity_hint=velocity)
+    stages.append(
+        gn.run(
+            state,
+            "state estimation",
+            ms.problem.smoothing,
+            PREPASS_ITERATIONS,
+            INTERMEDIATE_STEP_TOL,
+            INTERMEDIATE_DEFECT_TOL,
+            radius=1.0,
+            penalty=PENALTY_WEIGHT,
+        )
+    )
+    ev = state.evaluation
+    merit = ev.cost + 0.5 * PENALTY_WEIGHT * float(np.sum(ms.defects(ev, state.nodes) ** 2))
+    return state.nodes, merit
 
 
 def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:

@@ -80,6 +80,10 @@ class FitOptions:
         windows (see ``hframe_id.fitting.fit``); without them the full multiple-shooting
         problem starts from the initial parameters and measured nodes (converges only from
         good starts).
+    state_prepass : for models with a coordinate no output measures (one-axis: the idler),
+        first attempt the fit with the node states estimated at the parameters held
+        (continuity as a penalty), then release the parameters; if that attempt does not
+        converge, fit again from the measured nodes (docs/fitting.md, "One-axis").
     max_iterations : Gauss-Newton iterations per stage.
     step_tol : converged when no free parameter changes by more than this relative amount
         (and the continuity defects are below ``defect_tol``). 1e-7 is four orders below
@@ -110,6 +114,7 @@ class FitOptions:
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
     first_stage: bool = True
+    state_prepass: bool = True
     max_iterations: int = 150
     step_tol: float = 1e-6
     defect_tol: float = 1e-2
@@ -216,6 +221,7 @@ class FitOptions:
             "smoothing": list(self.smoothing) if self.smoothing else "model default",
             "smoothing_schedule": list(self.smoothing_schedule),
             "first_stage": bool(self.first_stage),
+            "state_prepass": bool(self.state_prepass),
             "max_iterations": int(self.max_iterations),
             "step_tol": float(self.step_tol),
             "defect_tol": float(self.defect_tol),

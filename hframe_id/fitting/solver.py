@@ -496,7 +496,12 @@ class GaussNewton:
                     ratio = max(ratio, 0.5)
                 length = float(np.linalg.norm(d))
                 if not np.isfinite(new) or ratio < 0.25:
-                    radius = 0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * radius
+                    if index.size:
+                        # (Node-only stages: nothing for the region to limit; the node
+                        # damping below does the shortening.)
+                        radius = (
+                            0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * radius
+                        )
                     self.node_damping *= 10.0
                     self.prox_scale = min(self.prox_scale * 10.0, MAX_PROX_SCALE)
                 elif ratio > 0.75:
