@@ -48,55 +48,49 @@ def path_figure(result: ClosedLoopResult, title: str = "") -> Figure:
     return fig
 
 
-def perpendicular_figure(result: ClosedLoopResult, title: str = "") -> Figure:
-    """Fig. 5.11: error perpendicular to the leg being driven [um] (above / right positive)."""
+def _time_figure(result: ClosedLoopResult, curves: list[tuple], ylabel: str, title: str) -> Figure:
+    """A figure over time with the leg boundaries marked; ``curves`` are (y, plot kwargs)."""
     fig = Figure(figsize=(8.0, 4.0), layout="constrained")
     ax = fig.add_subplot()
-    t = result.time_s
-    ax.plot(t, 1e6 * perpendicular_error(t, result.xy_m, result.trajectory), label="end-effector")
-    ax.plot(
-        t,
-        1e6 * perpendicular_error(t, result.xy_from_encoders_m, result.trajectory),
-        linestyle="--",
-        label="from motor angles (eq. 5.12)",
-    )
+    for values, style in curves:
+        ax.plot(result.time_s, values, **style)
     _legs(ax, result)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("error perpendicular to the leg [um]")
+    ax.set_ylabel(ylabel)
     ax.grid(True, linewidth=0.3)
     ax.legend()
-    ax.set_title(title or "Perpendicular end-effector error per leg")
+    ax.set_title(title)
     return fig
+
+
+def perpendicular_figure(result: ClosedLoopResult, title: str = "") -> Figure:
+    """Fig. 5.11: error perpendicular to the leg being driven [um] (above / right positive)."""
+    t = result.time_s
+    curves = [
+        (1e6 * perpendicular_error(t, result.xy_m, result.trajectory), {"label": "end-effector"}),
+        (
+            1e6 * perpendicular_error(t, result.xy_from_encoders_m, result.trajectory),
+            {"linestyle": "--", "label": "from motor angles (eq. 5.12)"},
+        ),
+    ]
+    return _time_figure(
+        result,
+        curves,
+        "error perpendicular to the leg [um]",
+        title or "Perpendicular end-effector error per leg",
+    )
 
 
 def motor_error_figure(result: ClosedLoopResult, title: str = "") -> Figure:
     """Fig. 5.13: actual minus desired motor angle [mrad]."""
-    fig = Figure(figsize=(8.0, 4.0), layout="constrained")
-    ax = fig.add_subplot()
-    for i in range(2):
-        ax.plot(result.time_s, 1e3 * result.motor_error_rad[:, i], label=f"motor {i + 1}")
-    _legs(ax, result)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("phi - phi_desired [mrad]")
-    ax.grid(True, linewidth=0.3)
-    ax.legend()
-    ax.set_title(title or "Motor-angle errors")
-    return fig
+    curves = [(1e3 * result.motor_error_rad[:, i], {"label": f"motor {i + 1}"}) for i in range(2)]
+    return _time_figure(result, curves, "phi - phi_desired [mrad]", title or "Motor-angle errors")
 
 
 def integral_figure(result: ClosedLoopResult, title: str = "") -> Figure:
     """Fig. 5.18: the PID integral terms (K_I times the error integral) [V]."""
-    fig = Figure(figsize=(8.0, 4.0), layout="constrained")
-    ax = fig.add_subplot()
-    for i in range(2):
-        ax.plot(result.time_s, result.integral_v[:, i], label=f"motor {i + 1}")
-    _legs(ax, result)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("integral term I [V]")
-    ax.grid(True, linewidth=0.3)
-    ax.legend()
-    ax.set_title(title or "PID integral terms")
-    return fig
+    curves = [(result.integral_v[:, i], {"label": f"motor {i + 1}"}) for i in range(2)]
+    return _time_figure(result, curves, "integral term I [V]", title or "PID integral terms")
 
 
 def write_control_plots(

@@ -183,6 +183,24 @@ def _stats(gn: GaussNewton, state: SolverState, problem: FitProblem) -> Statisti
     return compute_statistics(jac, residual, blocks, n_nuisance, names, problem.options.uncertainty)
 
 
+def _penalty_stage(
+    gn: GaussNewton, state: SolverState, smoothing: tuple[float, float], options: FitOptions
+) -> StageReport:
+    """Continuity as a penalty (see PENALTY_WEIGHT): brings far-off nodes into the basin of
+    the exact condensed iteration, stopping once an iteration gains under PENALTY_COST_RTOL."""
+    return gn.run(
+        state,
+        "continuity",
+        smoothing,
+        options.max_iterations,
+        INTERMEDIATE_STEP_TOL,
+        math.inf,
+        cost_rtol=PENALTY_COST_RTOL,
+        radius=1.0,
+        penalty=PENALTY_WEIGHT,
+    )
+
+
 def fit_recordings(
     recordings: list[Recording], initial: ParameterSet, options: FitOptions | None = None
 ) -> FitResult:
@@ -341,17 +359,7 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
             )
             if use_penalty:
                 stages.append(
-                    gn_sub.run(
-                        sub_state,
-                        "continuity",
-                        _scaled(smoothing, schedule[0]),
-                        options.max_iterations,
-                        INTERMEDIATE_STEP_TOL,
-                        math.inf,
-                        cost_rtol=PENALTY_COST_RTOL,
-                        radius=1.0,
-                        penalty=PENALTY_WEIGHT,
-                    )
+                    _penalty_stage(gn_sub, sub_state, _scaled(smoothing, schedule[0]), options)
                 )
             for factor in schedule:
                 stages.append(
@@ -388,19 +396,7 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
         start_nodes = measured if use_penalty else nodes
         state = SolverState(start_nodes.copy(), theta.copy(), active.copy(), velocity_hint=velocity)
         if use_penalty:
-            stages.append(
-                gn.run(
-                    state,
-                    "continuity",
-                    smoothing,
-                    options.max_iterations,
-                    INTERMEDIATE_STEP_TOL,
-                    math.inf,
-                    cost_rtol=PENALTY_COST_RTOL,
-                    radius=1.0,
-                    penalty=PENALTY_WEIGHT,
-                )
-            )
+            stages.append(_penalty_stage(gn, state, smoothing, options))
         stages.append(
             gn.run(
                 state,
