@@ -57,6 +57,9 @@ MISFIT = 1.5
 #: Relative standard error above which parameters are held together, not one at a time.
 HOPELESS_STD = 1.0
 INTERMEDIATE_DEFECT_TOL = 1.0
+#: Iterations without progress after which the fast path (exact continuity on the moving
+#: windows straight from the start) hands over to the penalty fallback (solver.GIVE_UP_*).
+FAST_PATH_PATIENCE = 6
 #: Iterations of the state-estimation pre-pass (nodes only, parameters held).
 PREPASS_ITERATIONS = 30
 
@@ -371,6 +374,7 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
                         INTERMEDIATE_STEP_TOL,
                         INTERMEDIATE_DEFECT_TOL,
                         radius=0.5,
+                        give_up=None if use_penalty else FAST_PATH_PATIENCE,
                     )
                 )
             if stages[-1].converged:
