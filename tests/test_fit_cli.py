@@ -28,6 +28,9 @@ def test_successful_fit_writes_a_loadable_versioned_parameter_file(fitted):
     assert prov["fit_id"] == yaml_path.stem
     assert prov["datasets"][0]["sha256"] and len(prov["datasets"][0]["sha256"]) == 64
     assert prov["solver"]["success"] is True
+    # sim-rig data fitted with the model that made them: residuals at the noise model's level
+    # (1 = exactly the noise; the smoothed-Coulomb and integrator differences add a little)
+    assert 0.8 < prov["solver"]["residual_rms_noise_std"] < 1.5
     assert set(prov["free_parameters"]) >= {"k_l", "k_r", "k_b", "g_2"}
     # every free parameter has estimate, error, interval and identifiability
     for key, entry in params.uncertainty["parameters"].items():
@@ -59,6 +62,15 @@ def test_failed_fit_writes_no_parameter_file(tmp_path, capsys):
     assert "no parameter file written" in capsys.readouterr().err
 
 
+def test_a_fit_far_above_the_noise_level_fails(tmp_path, capsys):
+    # The same converged fit as above (residual rms ~1 noise std) against a limit below it:
+    # what a local optimum far from the data looks like to the user.
+    status = main(["fit", str(DATA), "--out-dir", str(tmp_path), "--quiet", "--max-misfit", "0.5"])
+    assert status == 1
+    assert not list(tmp_path.glob("*.yaml"))
+    assert "converged to a poor fit: residual rms" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -67,6 +79,7 @@ def test_failed_fit_writes_no_parameter_file(tmp_path, capsys):
         ([str(DATA), "--bounds", "k_l=1:2"], "k_l"),
         ([str(DATA), "--bounds", "k_l=abc"], "LOW:HIGH"),
         ([str(DATA), "--shooting-interval", "0"], "shooting interval"),
+        ([str(DATA), "--max-misfit", "0"], "max_misfit"),
         ([str(DATA), "--initial", str(ROOT / "models" / "one-axis-table2.3.yaml")], "one-axis"),
         ([str(DATA), str(ROOT / "datasets" / "5V_oneaxis.mcap")], "one-axis"),
     ],

@@ -154,6 +154,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "identified and is held at its initial value",
     )
     parser.add_argument(
+        "--max-misfit",
+        type=float,
+        default=5.0,
+        help="a fit whose residual rms exceeds this many noise std (the rig's noise "
+        "model) fails: a local optimum far from the data (raise it for hardware data "
+        "with unmodelled effects)",
+    )
+    parser.add_argument(
         "--uncertainty",
         choices=UNCERTAINTY_METHODS,
         default="robust",
@@ -207,6 +215,7 @@ def _options(args: argparse.Namespace) -> FitOptions:
         step_tol=args.step_tol,
         defect_tol=args.defect_tol,
         identifiability_threshold=args.identifiability_threshold,
+        max_misfit=args.max_misfit,
         uncertainty=args.uncertainty,
         verbose=0 if args.quiet else 1,
         **extra,

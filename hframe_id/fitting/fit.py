@@ -122,6 +122,12 @@ class FitResult:
     def variant(self) -> str:
         return self.parameters.variant
 
+    @property
+    def residual_rms(self) -> float:
+        """Residual rms over the valid samples in units of the channels' noise std (about
+        1 for a correct model on sim-rig data)."""
+        return float(self.diagnostics.get("residual_rms_noise_std", math.nan))
+
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted +/- 95 %, identified."""
         lines = [f"{'parameter':<22} {'initial':>11} {'fitted':>11} {'95 % interval':>25}  status"]
@@ -137,7 +143,8 @@ class FitResult:
             )
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "
-            f"(cost {self.cost:.6g}, {self.iterations} iterations, {self.wall_time_s:.2f} s)"
+            f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} noise std, "
+            f"{self.iterations} iterations, {self.wall_time_s:.2f} s)"
         )
         return "\n".join(lines)
 
@@ -300,8 +307,7 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
         # Also when the stage did not converge, if the fit is at the noise level: a sloppy
         # direction (a parameter the data hardly determine) is the usual reason, and holding
         # it lets the rest converge. Far from a fit, error estimates mean nothing: fail.
-        n_valid = max(int(np.count_nonzero(ms.weight)), 1)
-        if not stages[-1].converged and 2 * state.evaluation.cost / n_valid > MISFIT**2:
+        if not stages[-1].converged and _residual_rms_ratio(ms, state) > MISFIT:
             break
         active_idx = np.flatnonzero(state.active)
         worst = int(np.argmax(stats.relative_std))
@@ -418,6 +424,12 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
     return state, gn
 
 
+def _residual_rms_ratio(ms: MultipleShooting, state: SolverState) -> float:
+    """Residual rms over the valid samples, in units of each channel's noise std."""
+    n_valid = max(int(np.count_nonzero(ms.weight)), 1)
+    return math.sqrt(2 * state.evaluation.cost / n_valid)
+
+
 def _unmeasured_coordinates(ms: MultipleShooting) -> bool:
     """Whether some coordinate is measured by no output (one-axis: the idler pulley)."""
     seen = np.any(ms.c[:, : ms.nq] != 0, axis=0)
@@ -509,9 +521,17 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
     not_identified = tuple(n for n in problem.free_names if n in held)
     if not_identified:
         _which_experiments(problem, ms, gn, state, stats, estimates, not_identified)
-    success = final.converged and not at_bound
+    misfit = _residual_rms_ratio(ms, state)
+    too_far = misfit > options.max_misfit
+    success = final.converged and not at_bound and not too_far
     if not final.converged:
         message = f"did not converge: {final.message}"
+    elif too_far:
+        message = (
+            f"converged to a poor fit: residual rms {misfit:.3g} x the noise model "
+            f"(limit {options.max_misfit:g}, FitOptions.max_misfit / --max-misfit); a local "
+            "optimum far from the data: try a start closer to the plant"
+        )
     elif at_bound:
         message = f"ended at a bound: {', '.join(at_bound)} (widen --bounds or fix them)"
     else:
@@ -552,6 +572,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
             "hac_bandwidths": stats.bandwidths,
             "collinearity_of_set": stats.collinearity_set,
             "max_defect": final.max_defect,
+            "residual_rms_noise_std": misfit,
             "substeps": list(final.substeps),
         },
     )

@@ -91,6 +91,11 @@ class FitOptions:
     defect_tol : continuity defects, in units of the measurement noise, at convergence.
     identifiability_threshold : a free parameter whose relative standard error exceeds this
         is reported as not identified, fixed at its initial value and the fit re-solved.
+    max_misfit : a converged fit whose residual rms exceeds this many noise standard
+        deviations (of the rig's noise model) is reported as failed: a local optimum far
+        from the data, not an estimate. 5 is far above a correct fit on sim-rig data
+        (1.0-1.3) and far below the wrong optima measured on one-axis data (10-45); real
+        hardware with unmodelled effects may need more.
     uncertainty : ``"robust"`` (default): per parameter the larger of the ``"noise-model"``
         and ``"hac"`` errors; ``"noise-model"``: parametric bootstrap of the linearised
         estimator with the rig's noise model (encoder quantization, laser noise);
@@ -119,6 +124,7 @@ class FitOptions:
     step_tol: float = 1e-6
     defect_tol: float = 1e-2
     identifiability_threshold: float = 0.1
+    max_misfit: float = 5.0
     uncertainty: str = "robust"
     confidence: float = 0.95
     substep_safety: float = 1.5
@@ -191,7 +197,13 @@ class FitOptions:
             )
         object.__setattr__(self, "smoothing_schedule", tuple(float(v) for v in schedule))
         _positive("max_iterations", self.max_iterations, integer=True)
-        for name in ("step_tol", "defect_tol", "identifiability_threshold", "substep_safety"):
+        for name in (
+            "step_tol",
+            "defect_tol",
+            "identifiability_threshold",
+            "max_misfit",
+            "substep_safety",
+        ):
             _positive(name, getattr(self, name))
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
@@ -226,6 +238,7 @@ class FitOptions:
             "step_tol": float(self.step_tol),
             "defect_tol": float(self.defect_tol),
             "identifiability_threshold": float(self.identifiability_threshold),
+            "max_misfit": float(self.max_misfit),
             "uncertainty": self.uncertainty,
             "confidence": float(self.confidence),
             "substep_safety": float(self.substep_safety),

@@ -168,7 +168,8 @@ def write_report(
         f"- status: {status} (solver: {result.message})",
         f"- model: {result.variant}; {len(recordings)} experiment(s): "
         + ", ".join(rec.name() for rec in recordings),
-        f"- cost {result.cost:.6g}, {result.iterations} iterations, "
+        f"- cost {result.cost:.6g} (residual rms {result.residual_rms:.3g} x the noise "
+        f"model), {result.iterations} iterations, "
         f"{result.wall_time_s:.2f} s wall time",
         f"- parameter file: `{parameter_file}`"
         if parameter_file
