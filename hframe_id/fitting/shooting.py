@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hframe_id.fitting.kernel import compiled_substep, window_function
+from hframe_id.fitting.kernel import compiled_state_substep, compiled_substep, window_function
 from hframe_id.fitting.problem import FitProblem, output_matrix, rigid_modes
 from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT
 
@@ -42,11 +42,11 @@ class Evaluation:
     """Residuals and derivatives at one point (arrays indexed by window first)."""
 
     residual: np.ndarray  # (W, M, n_y) weighted residuals
-    jac_node: np.ndarray  # (W, M, n_y, n_x)
-    jac_theta: np.ndarray  # (W, M, n_y, n_f) w.r.t. free log-parameters
+    jac_node: np.ndarray | None  # (W, M, n_y, n_x); None: evaluated without derivatives
+    jac_theta: np.ndarray | None  # (W, M, n_y, n_f) w.r.t. free log-parameters
     x_end: np.ndarray  # (W, n_x)
-    a_end: np.ndarray  # (W, n_x, n_x) d x_end / d node
-    b_end: np.ndarray  # (W, n_x, n_f) d x_end / d theta
+    a_end: np.ndarray | None  # (W, n_x, n_x) d x_end / d node
+    b_end: np.ndarray | None  # (W, n_x, n_f) d x_end / d theta
     states: np.ndarray  # (W, M + 1, n_x) states at the window's samples and its end
     n_substeps: tuple[int, int]  # (fast, stiff)
     n_stiff_windows: int
@@ -73,6 +73,8 @@ class MultipleShooting:
         # Outputs are coordinates: y_j = x[index_j] (faster than multiplying by C).
         unit_rows = np.all((self.c == 0) | (self.c == 1), axis=1) & (self.c.sum(axis=1) == 1)
         self._output_index = np.argmax(self.c, axis=1) if unit_rows.all() else None
+        #: State rows whose sensitivities the residuals need (all where C mixes states).
+        self._sens_rows = self._output_index if unit_rows.all() else np.arange(self.nx)
         self.threads = problem.options.threads
         m = self.m
         exp_of, start, length = [], [], []
@@ -112,6 +114,7 @@ class MultipleShooting:
         #: (fast, stiff) substeps held during a stage (set by the solver), or None.
         self.frozen_substeps: tuple[int, int] | None = None
         self.substep = compiled_substep(self.model, tuple(problem.free))
+        self.state_substep = compiled_state_substep(self.model)
         # State scale for continuity defects: the noise of the channel measuring a coordinate
         # (or the smallest channel noise), velocities that over one sample.
         scale = np.full(self.nq, float(np.min(problem.channel_std)))
@@ -260,17 +263,38 @@ class MultipleShooting:
         flips = np.any(np.abs(np.diff(np.sign(v), axis=1)) > 0, axis=(1, 2))
         return slow | flips | ~np.all(np.isfinite(v), axis=(1, 2))
 
-    def _integrate(self, idx: np.ndarray, nodes, p, smoothing, n_sub):
-        """Integrate windows ``idx``: states (len, M, n_x) after each sample and their
-        sensitivities (len, M, n_x, n_d). Evaluated on numpy buffers (no DM copies)."""
+    def _integrate(self, idx: np.ndarray, nodes, p, smoothing, n_sub, out: dict) -> None:
+        """Integrate windows ``idx`` with ``n_sub`` substeps per sample into ``out``: "xs"
+        (W, M, n_x) the states after each sample and, if present, "sens" (W, M - 1, rows,
+        n_d) the sensitivities to (node, free parameters) of the ``_sens_rows`` after samples
+        1..M-1 and "end" (W, n_x, n_d) those of the window's end state. Evaluated on numpy
+        buffers (no DM copies); only the sensitivities the residuals use are copied out."""
         count = len(idx)
         padded = int(math.ceil(count / PAD) * PAD)
         sel = np.concatenate([idx, np.full(padded - count, idx[-1])])
-        key = (n_sub, padded)
+        trigger, arrays = self._buffer(n_sub, padded, "sens" in out)
+        arrays["x0"][:] = nodes[sel]
+        arrays["u"][:] = self.inputs[sel].reshape(padded * self.m, self.nu)
+        arrays["p"][:] = p
+        arrays["s"][:] = smoothing
+        arrays["h"][0] = self.dt / n_sub
+        if trigger() != 0:
+            raise FloatingPointError("shooting window evaluation failed")
+        out["xs"][idx] = arrays["xs"].reshape(padded, self.m, self.nx)[:count]
+        if "sens" in out:
+            # Column-major (n_x, n_d) per sample: a C-order (n_d, n_x) block.
+            ss = arrays["ss"].reshape(padded, self.m, self.nx + self.nf, self.nx)[:count]
+            out["sens"][idx] = ss[:, :-1, :, self._sens_rows].transpose(0, 1, 3, 2)
+            out["end"][idx] = ss[:, -1].transpose(0, 2, 1)
+
+    def _buffer(self, n_sub: int, padded: int, derivatives: bool):
+        """(run, arrays) of the mapped window function for ``padded`` windows, its inputs and
+        outputs bound once to numpy arrays; run() returns the function's status."""
+        key = (n_sub, padded, derivatives)
         if key not in self._buffers:
-            fn = window_function(self.substep, n_sub, self.m, padded, self.threads)
+            substep = self.substep if derivatives else self.state_substep
+            fn = window_function(substep, n_sub, self.m, padded, self.threads)
             buf, trigger = fn.buffer()
-            nd = self.nx + self.nf
             # CasADi matrices are column-major: a (rows, cols) input is a C-order (cols, rows).
             arrays = {
                 "x0": np.zeros((padded, self.nx)),
@@ -279,26 +303,20 @@ class MultipleShooting:
                 "s": np.zeros(2),
                 "h": np.zeros(1),
                 "xs": np.zeros((padded * self.m, self.nx)),
-                "ss": np.zeros((padded * self.m * nd, self.nx)),
             }
+            if derivatives:
+                arrays["ss"] = np.zeros((padded * self.m * (self.nx + self.nf), self.nx))
             for i, name in enumerate(("x0", "u", "p", "s", "h")):
                 buf.set_arg(i, memoryview(arrays[name]))
-            buf.set_res(0, memoryview(arrays["xs"]))
-            buf.set_res(1, memoryview(arrays["ss"]))
-            self._buffers[key] = (fn, buf, trigger, arrays)
-        _, buf, trigger, arrays = self._buffers[key]
-        arrays["x0"][:] = nodes[sel]
-        arrays["u"][:] = self.inputs[sel].reshape(padded * self.m, self.nu)
-        arrays["p"][:] = p
-        arrays["s"][:] = smoothing
-        arrays["h"][0] = self.dt / n_sub
-        trigger()
-        if buf.ret() != 0:
-            raise FloatingPointError("shooting window evaluation failed")
-        nd = self.nx + self.nf
-        xs = arrays["xs"].reshape(padded, self.m, self.nx)[:count].copy()
-        ss = arrays["ss"].reshape(padded, self.m, nd, self.nx)[:count].transpose(0, 1, 3, 2)
-        return xs, ss.copy()
+            for i, name in enumerate(("xs", "ss")[: 1 + derivatives]):
+                buf.set_res(i, memoryview(arrays[name]))
+
+            def run(buf=buf, trigger=trigger) -> int:
+                trigger()
+                return buf.ret()
+
+            self._buffers[key] = (run, arrays)
+        return self._buffers[key]
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(
@@ -310,14 +328,50 @@ class MultipleShooting:
         plan: dict | None = None,
         windows: np.ndarray | None = None,
         base: Evaluation | None = None,
+        derivatives: bool = True,
     ) -> Evaluation:
         """Residuals, Jacobians and window ends at (nodes, theta).
 
         With ``windows`` (and ``base``), only those windows are integrated; the others are
         taken from ``base`` (which must be at the same theta for the result to be one point).
+        Without ``derivatives``, the Jacobian fields are None (a residual-only kernel, ~20x
+        cheaper: for comparing costs).
         """
         p = self.problem.parameters(theta)
-        plan = plan or self.substep_plan(p, smoothing)
+        plan = self._stage_plan(plan or self.substep_plan(p, smoothing))
+        w, m, nx, nd = self.n_windows, self.m, self.nx, self.nx + self.nf
+        todo = np.arange(w) if windows is None else np.asarray(windows)
+        if velocity_hint is None:
+            velocity_hint = np.repeat(nodes[:, None, self.nq :], m + 1, axis=1)
+        out = {"xs": np.empty((w, m, nx))}
+        if derivatives:
+            out["sens"] = np.empty((w, m - 1, len(self._sens_rows), nd))
+            out["end"] = np.empty((w, nx, nd))
+        stiff = self._integrate_split(todo, nodes, p, smoothing, plan, velocity_hint, out)
+        t = slice(None) if windows is None else todo
+        parts = self._residuals(nodes, p, t, out, derivatives)
+        if windows is None:
+            return Evaluation(
+                **parts,
+                n_substeps=(plan["fast"], plan["stiff"]),
+                n_stiff_windows=int(stiff.sum()),
+            )
+        merged = {}
+        for name, value in parts.items():
+            if value is None:
+                merged[name] = None
+                continue
+            array = getattr(base, name).copy()
+            array[t] = value
+            merged[name] = array
+        return Evaluation(
+            **merged,
+            n_substeps=(plan["fast"], plan["stiff"]),
+            n_stiff_windows=base.n_stiff_windows,
+        )
+
+    def _stage_plan(self, plan: dict) -> dict:
+        """The substep plan as the stage settings modify it (frozen, uniform)."""
         if self.frozen_substeps is not None:
             # Within a stage the discretization stays fixed (a jump from n to n + 1
             # substeps moves the cost by noise-sized amounts and stalls the iteration near
@@ -328,21 +382,22 @@ class MultipleShooting:
             plan = {**plan, "fast": fast, "stiff": stiff}
         if self.uniform_substeps:
             plan = {**plan, "fast": plan["stiff"]}
-        w, m, nx, nd = self.n_windows, self.m, self.nx, self.nx + self.nf
-        todo = np.arange(w) if windows is None else np.asarray(windows)
-        if velocity_hint is None:
-            velocity_hint = np.repeat(nodes[:, None, self.nq :], m + 1, axis=1)
+        return plan
+
+    def _integrate_split(self, todo, nodes, p, smoothing, plan, velocity_hint, out):
+        """Integrate windows ``todo`` into ``out``, the stiff ones (by the velocity hint, then
+        by the computed trajectory) with the stiff substeps. Returns the (W,) stiff flags."""
+        w = self.n_windows
         stiff = np.zeros(w, dtype=bool)
         stiff[todo] = self._needs_stiff(velocity_hint[todo], plan["threshold"])
-        xs = np.empty((w, m, nx))
-        ss = np.empty((w, m, nx, nd))
         pending = np.zeros(w, dtype=bool)
         pending[todo] = True
+        xs = out["xs"]
         for attempt in range(2):
             for flag, n_sub in ((False, plan["fast"]), (True, plan["stiff"])):
                 idx = np.flatnonzero((stiff == flag) & pending)
                 if idx.size:
-                    xs[idx], ss[idx] = self._integrate(idx, nodes, p, smoothing, n_sub)
+                    self._integrate(idx, nodes, p, smoothing, n_sub, out)
             if plan["fast"] == plan["stiff"] or attempt == 1:
                 break
             traj = np.concatenate([nodes[todo, None, :], xs[todo]], axis=1)[:, :, self.nq :]
@@ -352,45 +407,44 @@ class MultipleShooting:
                 break
             pending = recheck
             stiff |= recheck
-        t = todo
-        states_t = np.concatenate([nodes[t, None, :], xs[t]], axis=1)  # (T, M + 1, n_x)
-        eye = np.broadcast_to(np.eye(nx, nd), (len(t), 1, nx, nd))
-        sens_t = np.concatenate([eye, ss[t, :-1]], axis=1)  # at samples 0..M-1
+        return stiff
+
+    def _residuals(self, nodes, p, t, out: dict, derivatives: bool) -> dict:
+        """Evaluation fields of windows ``t`` from the integrated ``out``."""
+        m, nx = self.m, self.nx
+        xs = out["xs"][t]
+        states_t = np.concatenate([nodes[t, None, :], xs], axis=1)  # (T, M + 1, n_x)
         weight = self.weight[t]
         if self._output_index is not None:
             y = states_t[:, :m, self._output_index]
-            jac = sens_t[:, :, self._output_index, :] * weight[..., None]
         else:
             y = np.einsum("jx,wkx->wkj", self.c, states_t[:, :m])
-            jac = np.einsum("jx,wkxd->wkjd", self.c, sens_t) * weight[..., None]
-        residual_t = weight * (y - self.measured[t])
-        p_free = p[list(self.problem.free)]
-        end = ss[t, -1]
         parts = {
-            "residual": residual_t,
-            "jac_node": jac[..., :nx],
-            "jac_theta": jac[..., nx:] * p_free,
-            "x_end": xs[t, -1],
-            "a_end": end[:, :, :nx],
-            "b_end": end[:, :, nx:] * p_free,
+            "residual": weight * (y - self.measured[t]),
+            "jac_node": None,
+            "jac_theta": None,
+            "x_end": xs[:, -1],
+            "a_end": None,
+            "b_end": None,
             "states": states_t,
         }
-        if windows is None:
-            return Evaluation(
-                **parts,
-                n_substeps=(plan["fast"], plan["stiff"]),
-                n_stiff_windows=int(stiff.sum()),
-            )
-        merged = {}
-        for name, value in parts.items():
-            array = getattr(base, name).copy()
-            array[t] = value
-            merged[name] = array
-        return Evaluation(
-            **merged,
-            n_substeps=(plan["fast"], plan["stiff"]),
-            n_stiff_windows=base.n_stiff_windows,
-        )
+        if not derivatives:
+            return parts
+        sens = out["sens"][t]
+        eye = np.eye(nx, nx + self.nf)[self._sens_rows]
+        eye = np.broadcast_to(eye, (len(xs), 1, *eye.shape))
+        sens_t = np.concatenate([eye, sens], axis=1)  # at samples 0..M-1
+        if self._output_index is not None:
+            jac = sens_t * weight[..., None]
+        else:
+            jac = np.einsum("jx,wkxd->wkjd", self.c, sens_t) * weight[..., None]
+        p_free = p[list(self.problem.free)]
+        end = out["end"][t]
+        parts["jac_node"] = jac[..., :nx]
+        parts["jac_theta"] = jac[..., nx:] * p_free
+        parts["a_end"] = end[:, :, :nx]
+        parts["b_end"] = end[:, :, nx:] * p_free
+        return parts
 
     def defects(self, ev: Evaluation, nodes: np.ndarray, links=None) -> np.ndarray:
         """(W - 1, n_x) continuity defects x_end_i - node_{i+1}, scaled by the state scale;
