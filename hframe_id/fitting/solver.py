@@ -211,12 +211,14 @@ class GaussNewton:
                 a = ev.a_end[i] @ a + defect[i]
                 gmat = ev.a_end[i] @ gmat
                 gmat[:, nx:] += b_all[i]
-        jc = np.einsum("wri,wij->wrj", js_all, gains)
+        # Batched BLAS products (einsum does not use BLAS: 3x slower here).
+        jc = js_all @ gains
         jc[:, :, nx:] += jp_all
-        rc = r_all + np.einsum("wri,wi->wr", js_all, offsets)
+        rc = r_all + (js_all @ offsets[:, :, None])[:, :, 0]
         # Per segment: node block, coupling to theta; theta block summed.
-        he = np.einsum("wri,wrj->wij", jc, jc)
-        ge = np.einsum("wri,wr->wi", jc, rc)
+        jc_t = jc.transpose(0, 2, 1)
+        he = jc_t @ jc
+        ge = (jc_t @ rc[:, :, None])[:, :, 0]
         h_ss = np.zeros((n_seg, nx, nx))
         h_sp = np.zeros((n_seg, nx, nf))
         g_s = np.zeros((n_seg, nx))
