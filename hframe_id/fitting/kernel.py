@@ -19,6 +19,7 @@ fit does not fit in 24 GB).
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import platform
@@ -40,6 +41,85 @@ COMPILE_FLAGS = ("-O2", "-fPIC", "-shared")
 #: already with -mavx alone); contraction into FMAs stays off, so the results are bitwise
 #: those of the portable build.
 NATIVE_FLAGS = ("-march=native", "-ffp-contract=off")
+
+#: The loop over windows, samples and substeps, compiled with the substep: as the MX
+#: map/mapaccum of ``window_function`` (the same calls on the same numbers, so bitwise the
+#: same results) without its per-call overhead, padding or per-size construction.
+#: Placeholders: FN (the substep), NX, ND (sensitivity columns, 0: none), NU.
+DRIVER = r"""
+#include <pthread.h>
+
+typedef struct {
+  const casadi_real *x0, *u, *p, *s;
+  casadi_real h;
+  int n_sub, m, first, last, status;
+  casadi_real *xs, *ss;
+} hf_job;
+
+static void* hf_run(void* arg) {
+  hf_job* job = (hf_job*)arg;
+  casadi_real x[2][NX], sens[2][NX * ND + 1];
+  const casadi_real* in[6];
+  casadi_real* out[2];
+  for (int w = job->first; w < job->last; ++w) {
+    int c = 0;
+    for (int i = 0; i < NX; ++i) x[0][i] = job->x0[w * NX + i];
+    for (int i = 0; i < NX * ND; ++i) sens[0][i] = 0;
+    for (int i = 0; i < NX && ND; ++i) sens[0][i * NX + i] = 1;
+    for (int k = 0; k < job->m; ++k) {
+      const casadi_real* u = job->u + (w * job->m + k) * NU;
+      for (int j = 0; j < job->n_sub; ++j) {
+        int a = 0;
+        in[a++] = x[c];
+        if (ND) in[a++] = sens[c];
+        in[a++] = u;
+        in[a++] = job->p;
+        in[a++] = job->s;
+        in[a++] = &job->h;
+        out[0] = x[1 - c];
+        out[1] = sens[1 - c];
+        if (FN(in, out, 0, 0, 0)) {
+          job->status = 1;
+          return 0;
+        }
+        c = 1 - c;
+      }
+      long row = (long)w * job->m + k;
+      for (int i = 0; i < NX; ++i) job->xs[row * NX + i] = x[c][i];
+      for (int i = 0; i < NX * ND; ++i) job->ss[row * NX * ND + i] = sens[c][i];
+    }
+  }
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int hf_windows(const casadi_real* x0, const casadi_real* u,
+    const casadi_real* p, const casadi_real* s, casadi_real h, int n_sub, int m,
+    int n_windows, int n_threads, casadi_real* xs, casadi_real* ss) {
+  hf_job jobs[64];
+  pthread_t threads[64];
+  if (n_threads < 1) n_threads = 1;
+  if (n_threads > 64) n_threads = 64;
+  if (n_threads > n_windows) n_threads = n_windows > 0 ? n_windows : 1;
+  for (int t = 0; t < n_threads; ++t) {
+    hf_job job = {x0, u, p, s, h, n_sub, m, (int)((long)n_windows * t / n_threads),
+                  (int)((long)n_windows * (t + 1) / n_threads), 0, xs, ss};
+    jobs[t] = job;
+  }
+  int started = 0;
+  for (int t = 1; t < n_threads; ++t) {
+    if (pthread_create(&threads[t], 0, hf_run, &jobs[t]) != 0) break;
+    started = t;
+  }
+  for (int t = started + 1; t < n_threads; ++t) hf_run(&jobs[t]);  /* not started: here */
+  hf_run(&jobs[0]);
+  int status = jobs[0].status;
+  for (int t = 1; t <= started; ++t) {
+    pthread_join(threads[t], 0);
+  }
+  for (int t = 1; t < n_threads; ++t) status |= jobs[t].status;
+  return status;
+}
+"""
 
 
 def cache_dir() -> Path:
@@ -122,23 +202,77 @@ def _host() -> str:
     return f"{platform.machine()} {platform.processor()} {flags}"
 
 
-def _compile(function: ca.Function) -> ca.Function:
-    """Compile ``function`` to a shared library (cached by source hash) and load it: for
-    this machine's instruction set if the compiler can, else portable code."""
-    compiler = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-    if compiler is None:
-        return function
+def _source(function: ca.Function) -> str:
+    """The C source of ``function`` (CasADi code generation)."""
     with tempfile.TemporaryDirectory() as tmp:
-        source = Path(tmp) / "kernel.c"
         cg = ca.CodeGenerator("kernel.c", {"with_header": False})
         cg.add(function)
         cg.generate(str(Path(tmp)) + os.sep)
-        code = source.read_text()
+        return (Path(tmp) / "kernel.c").read_text()
+
+
+def _compiler() -> str | None:
+    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+
+
+def _build_any(name: str, code: str, extra: tuple[str, ...] = ()) -> Path | None:
+    """The library of ``code``: for this machine's instruction set if the compiler can, else
+    portable; None without a working compiler."""
+    compiler = _compiler()
+    if compiler is None:
+        return None
     for flags, host in (((*COMPILE_FLAGS, *NATIVE_FLAGS), _host()), (COMPILE_FLAGS, "")):
-        library = _build(compiler, function.name(), code, flags, host)
+        library = _build(compiler, name, code, (*flags, *extra), host)
         if library is not None:
-            return ca.external(function.name(), str(library))
-    return function
+            return library
+    return None
+
+
+def _compile(function: ca.Function) -> ca.Function:
+    """Compile ``function`` to a shared library (cached by source hash) and load it, or
+    return it as it is without a C compiler."""
+    library = _build_any(function.name(), _source(function))
+    return function if library is None else ca.external(function.name(), str(library))
+
+
+class WindowKernel:
+    """``hf_windows`` of a compiled library (see DRIVER): integrates shooting windows."""
+
+    def __init__(self, library: Path):
+        self._lib = ctypes.CDLL(str(library))  # kept: the function lives in it
+        pointer = ctypes.c_void_p
+        self._fn = self._lib.hf_windows
+        self._fn.restype = ctypes.c_int
+        self._fn.argtypes = [pointer] * 4 + [ctypes.c_double] + [ctypes.c_int] * 4 + [pointer] * 2
+
+    def __call__(self, arrays: dict, h: float, n_sub: int, m: int, count: int, threads: int):
+        """Integrate ``count`` windows of ``m`` samples, ``n_sub`` substeps of ``h`` [s] each,
+        from C-contiguous float arrays "x0", "u", "p", "s" into "xs" (and "ss" if present),
+        laid out as for ``window_function``. Returns the status (0: success)."""
+        ss = arrays.get("ss")
+        return self._fn(
+            *(arrays[name].ctypes.data for name in ("x0", "u", "p", "s")),
+            h,
+            n_sub,
+            m,
+            count,
+            threads,
+            arrays["xs"].ctypes.data,
+            None if ss is None else ss.ctypes.data,
+        )
+
+
+@lru_cache(maxsize=16)
+def compiled_windows(model: Model, free: tuple[int, ...] | None) -> WindowKernel | None:
+    """The window loop compiled with the substep (with sensitivities to the ``free``
+    parameters; None: without sensitivities), or None if it cannot be built here."""
+    function = state_substep_function(model) if free is None else substep_function(model, free)
+    nd = 0 if free is None else model.n_states + len(free)
+    sizes = {"FN": function.name(), "NX": model.n_states, "ND": nd, "NU": model.n_inputs}
+    defines = "".join(f"#define {key} {value}\n" for key, value in sizes.items())
+    name = f"{function.name()}_windows"
+    library = _build_any(name, _source(function) + defines + DRIVER, ("-pthread",))
+    return None if library is None else WindowKernel(library)
 
 
 def _build(compiler: str, name: str, code: str, flags: tuple[str, ...], host: str):
