@@ -12,9 +12,10 @@ as C and compiled once per (model, free set); the compiled library is cached on 
 the hash of its source, so later fits load it in milliseconds. Where no C compiler is
 available, CasADi's SX virtual machine runs the same graph about 2x slower.
 
-Samples, windows and experiments are then layered on top as MX ``mapaccum``/``map`` calls of
-this one function: nothing is unrolled over the record (the naive unrolled graph of a six-file
-fit does not fit in 24 GB).
+Samples, windows and experiments are then layered on top: a C loop compiled with the substep
+(``DRIVER``: windows split over threads, samples and substeps in sequence), or, without a C
+compiler, MX ``mapaccum``/``map`` calls of this one function. Nothing is unrolled over the
+record (the naive unrolled graph of a six-file fit does not fit in 24 GB).
 """
 
 from __future__ import annotations
@@ -37,9 +38,9 @@ from hframe_id.models import Model
 CACHE_ENV = "HFRAME_ID_CACHE"
 COMPILE_FLAGS = ("-O2", "-fPIC", "-shared")
 #: Tried first: code for this machine's instruction set. VEX-encoded (AVX) code runs the
-#: kernel 22 % faster on a Xeon with AVX-512 (an all-window evaluation 0.161 -> 0.124 s,
-#: already with -mavx alone); contraction into FMAs stays off, so the results are bitwise
-#: those of the portable build.
+#: kernel 22 % faster on a Xeon with AVX-512 (an all-window evaluation through CasADi's
+#: map 0.161 -> 0.124 s, already with -mavx alone); contraction into FMAs stays off, so the
+#: results are bitwise those of the portable build.
 NATIVE_FLAGS = ("-march=native", "-ffp-contract=off")
 
 #: The loop over windows, samples and substeps, compiled with the substep: as the MX
