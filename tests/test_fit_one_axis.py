@@ -13,6 +13,7 @@ inertia; also applied to the stiffnesses); measured worst error 0.37 % (B_1), st
 within 0.05 %. Time printed, not asserted (measured ~5 s).
 """
 
+import math
 from pathlib import Path
 
 import pytest
@@ -51,21 +52,32 @@ def test_shipped_pulses_recover_friction_inertia_and_belts_within_2_percent(fit)
             assert est.identified, name
 
 
-def test_fresh_plant_started_at_the_truth_stays_there():
-    """A fresh simulated plant (study seed 6: the default free set x/÷1.3 off Table 2.3,
-    standard one-axis pulses, rig sensors), started at the truth (x/÷1.0001).
+#: Study seeds of the fresh-plant test: 0-4 of the ten measured in docs/fitting.md (seed 4 needs
+#: the restarts along k2, k3: without them it stops at a secondary optimum, k2 +19 %).
+FRESH_SEEDS = (0, 1, 2, 3, 4)
 
-    Before the state-estimation pre-pass (node states of the unmeasured idler estimated with
-    the parameters held) only seeds 1 and 3 of 0-4 stayed at the truth. With it, 10 of 10
-    seeds converge from the truth, worst errors 0.9-2.6 % (F_c, the cart's Coulomb friction
-    seen only while the laser is valid, on 9 of 10). Seed 6 (worst 0.98 %, F_c) is asserted
-    within 2 %, issue 5's target. Starts off by x3 still mostly fail (docs/fitting.md,
-    "One-axis"), so they are not asserted. Measured ~5 s.
+
+@pytest.mark.parametrize("seed", FRESH_SEEDS)
+def test_fresh_plants_from_starts_off_by_10_percent(seed):
+    """Fresh simulated plants (the default free set x/÷1.3 off Table 2.3, standard one-axis
+    pulses, rig sensors), started x/÷1.1 off the truth (study ``--start-factor 1.1``).
+
+    Measured over seeds 0-9 (docs/fitting.md, "One-axis"): 10 of 10 converge; stiffnesses
+    within 0.67 %, J_1, M, B_1, b, tau_c1 within 1.72 % (issue 5's 2 % for friction and
+    inertia); the cart's Coulomb friction F_c, seen only while the laser is valid, within
+    2.55 %, more than 2 % on 5 of 10 seeds: its robust standard error is 1.3-4.9 %, so the
+    pulses do not determine it to 2 %, and it is checked against its own interval instead
+    (|error| / std error measured <= 1.7; asserted < 3). Starts off by x3 fail (see docs).
     """
     from hframe_id.fitting.study import run_trial
 
-    trial = run_trial("one-axis", 6, start_factor=1.0001)
+    trial = run_trial("one-axis", seed, start_factor=1.1)
     print(trial.errors, trial.stages)
     assert trial.success, trial.message
     for name, error in trial.errors.items():
-        assert abs(error) < 0.02, (name, error)
+        if name.startswith("k"):
+            assert abs(error) < 0.01, (name, error)
+        elif name == "F_c":
+            assert abs(math.log1p(error)) < 3 * trial.relative_std[name], (name, error)
+        else:
+            assert abs(error) < 0.02, (name, error)

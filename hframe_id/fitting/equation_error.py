@@ -42,7 +42,8 @@ def _acceleration_function(problem: FitProblem) -> ca.Function:
     u = ca.SX.sym("u", model.n_inputs)
     p = ca.SX.sym("p", len(model.parameters))
     e = a - model.dynamics(x, u, p, ca.DM(problem.smoothing))[nq:]
-    return ca.Function("acceleration_error", [x, a, u, p], [e, ca.jacobian(e, p)])
+    # Dense, so that the mapped outputs fill numpy buffers directly (``residual``).
+    return ca.Function("acceleration_error", [x, a, u, p], [e, ca.densify(ca.jacobian(e, p))])
 
 
 def equation_error_start(
@@ -113,6 +114,15 @@ def equation_error_start(
     mask = np.hstack([d[3] for d in data]).astype(float)  # (nq, n)
     n = xs.shape[1]
     mapped = fn.map(n, "thread", problem.options.threads)
+    # Inputs and outputs bound once to numpy arrays (column-major: an (r, c) matrix is a
+    # C-order (c, r) array): converting DMs costs twice the evaluation itself.
+    buffer, run = mapped.buffer()
+    args = [np.ascontiguousarray(v.T) for v in (xs, acc, us)] + [np.empty((n, len(p0)))]
+    outs = [np.empty((n, nq)), np.empty((n * len(p0), nq))]
+    for i, array in enumerate(args):
+        buffer.set_arg(i, memoryview(array))
+    for i, array in enumerate(outs):
+        buffer.set_res(i, memoryview(array))
     scale = np.ones(nq)
 
     cache: dict = {}
@@ -123,9 +133,11 @@ def equation_error_start(
             cache.clear()
             p = p0.copy()
             p[free] = p0[free] * np.exp(theta)
-            e, jac = mapped(xs, acc, us, p)
-            e = e.full() * mask  # (nq, n)
-            jac = jac.full().reshape(nq, n, -1)[:, :, free] * p[free] * mask[:, :, None]
+            args[3][:] = p
+            run()
+            e = np.ascontiguousarray(outs[0].T) * mask  # (nq, n)
+            jac = np.ascontiguousarray(outs[1].reshape(n, -1, nq).transpose(2, 0, 1))
+            jac = jac[:, :, free] * p[free] * mask[:, :, None]
             cache[key] = (e, jac)
         e, jac = cache[key]
         return (e / scale[:, None]).ravel(), (jac / scale[:, None, None]).reshape(nq * n, -1)
