@@ -27,6 +27,8 @@ def test_successful_fit_writes_a_loadable_versioned_parameter_file(fitted):
     prov = params.provenance
     assert prov["fit_id"] == yaml_path.stem
     assert prov["datasets"][0]["sha256"] and len(prov["datasets"][0]["sha256"]) == 64
+    # recorded relative to the project (the same on every clone), not to the working directory
+    assert prov["datasets"][0]["file"] == "datasets/4V_xmotion.mcap"
     assert prov["solver"]["success"] is True
     # sim-rig data fitted with the model that made them: residuals at the noise model's level
     # (1 = exactly the noise; the smoothed-Coulomb and integrator differences add a little)
@@ -58,8 +60,41 @@ def test_failed_fit_writes_no_parameter_file(tmp_path, capsys):
     assert status == 1
     assert not list(tmp_path.glob("*.yaml"))
     (report,) = tmp_path.glob("*-report.md")
-    assert "FAILED" in report.read_text()
-    assert "no parameter file written" in capsys.readouterr().err
+    text = report.read_text()
+    assert "FAILED" in text and "not assessed (fit failed)" in text
+    out, err = capsys.readouterr()
+    assert "no parameter file written" in err
+    # a failed fit's error estimates mean nothing: no parameter is called identified
+    assert "not assessed (fit failed)" in out and " identified" not in out
+
+
+def test_same_second_fits_never_share_files(tmp_path):
+    from hframe_id.fitting.output import unused_fit_id
+
+    assert unused_fit_id(tmp_path, "hframe-8-x") == "hframe-8-x"
+    (tmp_path / "hframe-8-x-report.md").write_text("a failed fit's report")
+    assert unused_fit_id(tmp_path, "hframe-8-x") == "hframe-8-x-2"
+    (tmp_path / "hframe-8-x-2-plots").mkdir()
+    assert unused_fit_id(tmp_path, "hframe-8-x") == "hframe-8-x-3"
+
+
+def test_bare_names_are_found_from_any_directory(tmp_path, monkeypatch):
+    from hframe_id.cli.fit_command import resolve_dataset
+
+    monkeypatch.chdir(tmp_path)
+    assert resolve_dataset("4V_xmotion.mcap").resolve() == DATA.resolve()
+
+
+def test_an_unusable_out_dir_fails_before_solving(tmp_path, capsys):
+    target = tmp_path / "a_file"
+    target.write_text("not a directory")
+    status = main(["fit", str(DATA), "--out-dir", str(target / "sub"), "--quiet"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hframe-id: error: --out-dir") and "is not a directory" in err
+    status = main(["fit", str(DATA), "--out-dir", str(target), "--quiet"])
+    assert status == 2
+    assert "exists and is not a directory" in capsys.readouterr().err
 
 
 def test_a_fit_far_above_the_noise_level_fails(tmp_path, capsys):

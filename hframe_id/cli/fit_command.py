@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -15,7 +16,9 @@ from hframe_id.fitting.report import MODELS_DIR, THESIS_REFERENCE, write_report
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
 
-DATASETS_DIR = Path("datasets")
+#: Where bare recording names are looked up: the working directory's datasets/, then the
+#: project's shipped datasets/.
+DATASETS_DIRS = (Path("datasets"), MODELS_DIR.parent / "datasets")
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -39,6 +42,15 @@ def _float(text: str, what: str) -> float:
         raise OptionError(f"{what}: {text!r} is not a number") from None
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows defaults, except empty ones and flags (their help says what happens)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.default in (None, "", [], ()) or isinstance(action.default, bool):
+            return action.help or ""
+        return super()._get_help_string(action)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "fit",
@@ -50,13 +62,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "<fit id>-report.md with plots to --out-dir. Exit status: 0 success, 1 the solver "
             "failed (report only), 2 bad input."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=_HelpFormatter,
     )
     parser.add_argument(
         "files",
         nargs="+",
         metavar="FILE",
-        help="MCAP recordings; a bare name is looked up in datasets/",
+        help="MCAP recordings; a bare name is looked up in ./datasets/, then in the "
+        "project's shipped datasets/",
     )
     parser.add_argument(
         "--initial",
@@ -88,7 +101,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="NAME=LOW:HIGH",
         action="append",
         default=[],
-        help="bounds of a free parameter in SI units (repeatable)",
+        help="bounds of a free parameter (exact name, not a pattern) in SI units, both "
+        "positive (parameters are fitted in log scale) and enclosing the initial value "
+        "(repeatable)",
     )
     parser.add_argument(
         "--bound-factor",
@@ -101,7 +116,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="OUTPUT=STD",
         action="append",
         default=[],
-        help="noise std [rad or m] that weights an output's residuals (repeatable); default: "
+        help="noise std [rad or m] that weights an output's residuals (repeatable; outputs "
+        "phi1, phi2, x, y for the H-frame, phi1, x for one-axis); default: "
         "encoder step/sqrt(12) and the rig's laser noise",
     )
     parser.add_argument(
@@ -120,7 +136,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--smoothing-schedule",
         metavar="F1,F2,...",
         default="1",
-        help="continuation factors on the smoothing, decreasing to 1",
+        help="continuation factors on the smoothing, decreasing to 1, applied in the "
+        "moving-window stages; the default 1 is no continuation (measured worse on these "
+        "records, docs/fitting.md)",
     )
     parser.add_argument(
         "--no-first-stage",
@@ -144,7 +162,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--defect-tol",
         type=float,
         default=1e-2,
-        help="continuity defects at convergence, in noise units",
+        help="continuity defects at convergence, in noise units; a stage that can no "
+        "longer decrease its cost is also accepted with defects below 2 noise std if the "
+        "residuals are at the noise level (rms <= 1.5 std), and the largest defect is "
+        "reported in the solver message",
     )
     parser.add_argument(
         "--identifiability-threshold",
@@ -167,7 +188,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="robust",
         help="how standard errors are computed",
     )
-    parser.add_argument("--threads", type=int, default=None, help="worker threads")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="worker threads (default: the CPU count, at most 8)",
+    )
     parser.add_argument("--out-dir", default="fits", help="where the fit and report go")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.set_defaults(handler=run)
@@ -177,10 +203,26 @@ def resolve_dataset(name: str) -> Path:
     path = Path(name)
     if path.exists():
         return path
-    candidate = DATASETS_DIR / name
-    if candidate.exists():
-        return candidate
-    raise FitError(f"{name}: no such recording (also looked in {DATASETS_DIR}/)")
+    for directory in DATASETS_DIRS:
+        candidate = directory / name
+        if candidate.exists():
+            return candidate
+    looked = ", ".join(f"{d}/" for d in DATASETS_DIRS)
+    raise FitError(f"{name}: no such recording (also looked in {looked})")
+
+
+def check_out_dir(out_dir: Path) -> None:
+    """Fail before any solving if ``out_dir`` cannot hold the results (not a directory, or
+    its nearest existing ancestor is not a writable directory); creates nothing."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise FitError(f"--out-dir {out_dir}: exists and is not a directory")
+    ancestor = out_dir
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise FitError(f"--out-dir {out_dir}: {ancestor} is not a directory")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise FitError(f"--out-dir {out_dir}: {ancestor} is not writable")
 
 
 def _options(args: argparse.Namespace) -> FitOptions:
@@ -241,6 +283,7 @@ def run(args: argparse.Namespace) -> int:
         initial_path = MODELS_DIR / THESIS_REFERENCE[variant][0]
     initial = load_parameter_file(initial_path, variant=variant)
     out_dir = Path(args.out_dir)
+    check_out_dir(out_dir)
     if not args.quiet:
         total = sum(rec.n_samples for rec in recordings)
         print(
@@ -249,7 +292,10 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     result = fit_recordings(recordings, initial, options)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FitError(f"--out-dir {out_dir}: cannot create it ({err.strerror})") from err
     fit_id, parameter_file = write_parameter_file(result, recordings, paths, initial_path, out_dir)
     report = write_report(result, recordings, fit_id, parameter_file, out_dir)
     print(result.summary())

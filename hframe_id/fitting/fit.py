@@ -64,8 +64,8 @@ FAST_PATH_PATIENCE = 6
 #: Restarts along the stiffnesses at an unmeasured coordinate (see
 #: ``_restarts_along_unmeasured_springs``): factor, at most this many, and the cost decrease
 #: (chi^2 / 2 units: 2 is a likelihood-ratio of e^2) a restart must bring to be kept.
-RESTART_FACTOR = 1.18
-RESTART_LIMIT = 12
+RESTART_FACTORS = (1.18, 1.4)
+RESTART_LIMIT = 16
 RESTART_MIN_GAIN = 2.0
 #: Iterations of the state-estimation pre-pass (nodes only, parameters held).
 PREPASS_ITERATIONS = 30
@@ -141,7 +141,12 @@ class FitResult:
         for est in self.estimates.values():
             if not est.free:
                 continue
-            status = "identified" if est.identified else "NOT identified (held)"
+            if not self.success:
+                status = "not assessed (fit failed)"
+            elif est.identified:
+                status = "identified"
+            else:
+                status = "NOT identified (held)"
             if est.at_bound:
                 status += ", at bound"
             lines.append(
@@ -151,7 +156,7 @@ class FitResult:
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "
             f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} noise std, "
-            f"{self.iterations} iterations, {self.wall_time_s:.2f} s)"
+            f"{self.iterations} iterations in all stages, {self.wall_time_s:.2f} s)"
         )
         return "\n".join(lines)
 
@@ -201,13 +206,17 @@ def _stats(gn: GaussNewton, state: SolverState, problem: FitProblem) -> Statisti
 
 
 def _penalty_stage(
-    gn: GaussNewton, state: SolverState, smoothing: tuple[float, float], options: FitOptions
+    gn: GaussNewton,
+    state: SolverState,
+    smoothing: tuple[float, float],
+    options: FitOptions,
+    windows: str,
 ) -> StageReport:
     """Continuity as a penalty (see PENALTY_WEIGHT): brings far-off nodes into the basin of
     the exact condensed iteration, stopping once an iteration gains under PENALTY_COST_RTOL."""
     return gn.run(
         state,
-        "continuity",
+        f"{windows}, continuity as penalty",
         smoothing,
         options.max_iterations,
         INTERMEDIATE_STEP_TOL,
@@ -264,7 +273,7 @@ def fit_recordings(
             break
         if best is None or state.evaluation.cost < best[0].evaluation.cost:
             best = outcome
-    if len(attempts) > 1 and stages[-1].converged:
+    if len(attempts) > 1:
         best = _restarts_along_unmeasured_springs(
             problem, ms, nodes, velocity, stages, counter, progress, best
         )
@@ -277,7 +286,8 @@ def _restarts_along_unmeasured_springs(
     problem, ms, nodes, velocity, stages, counter, progress, best
 ):
     """Restarts with each free stiffness of a belt section at an unmeasured pulley moved by
-    x/÷ ``RESTART_FACTOR``; keeps the lowest converged cost, repeated while it improves.
+    x/÷ each of ``RESTART_FACTORS``; keeps the lowest converged cost, repeated while it
+    improves. Also run when the fit has not converged: a converged restart replaces it.
 
     Why: the unmeasured idler's mode (~170 Hz, set by k2 + k3) makes the output error
     multimodal along those stiffnesses, like a sinusoid's frequency. Profile of one-axis
@@ -293,7 +303,7 @@ def _restarts_along_unmeasured_springs(
     while improved and tried < RESTART_LIMIT:
         improved = False
         for index in springs:
-            for factor in (RESTART_FACTOR, 1 / RESTART_FACTOR):
+            for factor in (f**sign for f in RESTART_FACTORS for sign in (1, -1)):
                 if not state.active[index] or tried >= RESTART_LIMIT:
                     continue
                 theta = state.theta.copy()
@@ -303,6 +313,7 @@ def _restarts_along_unmeasured_springs(
                     problem.log_upper[index],
                 )
                 trial_stages: list[StageReport] = []
+                label = f"restart {tried + 1}, {problem.free_names[index]} x{factor:.3g}"
                 trial_state, trial_gn = _solve(
                     problem,
                     ms,
@@ -312,7 +323,7 @@ def _restarts_along_unmeasured_springs(
                     state.active.copy(),
                     trial_stages,
                     counter,
-                    progress,
+                    _labelled(progress, label),
                     prepass=True,
                 )
                 tried += 1
@@ -331,11 +342,19 @@ def _restarts_along_unmeasured_springs(
             name=f"restarts along {', '.join(problem.free_names[i] for i in springs)}",
             iterations=iterations,
             wall_time_s=time.perf_counter() - start,
-            message=f"{final.message}; {tried} restarts (x/÷{RESTART_FACTOR:g}), "
+            message=f"{final.message}; {tried} restarts "
+            f"(x/÷{', '.join(f'{f:g}' for f in RESTART_FACTORS)}), "
             f"best cost {state.evaluation.cost:.6g}",
         )
     )
     return state, gn, stats, held
+
+
+def _labelled(progress, label: str):
+    """A progress sink that prefixes the stage name with ``label`` (None stays None)."""
+    if progress is None:
+        return None
+    return lambda p: progress(replace(p, stage=f"{label}: {p.stage}"))
 
 
 def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting) -> list[int]:
@@ -460,13 +479,19 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
             )
             if use_penalty:
                 stages.append(
-                    _penalty_stage(gn_sub, sub_state, _scaled(smoothing, schedule[0]), options)
+                    _penalty_stage(
+                        gn_sub,
+                        sub_state,
+                        _scaled(smoothing, schedule[0]),
+                        options,
+                        "moving windows",
+                    )
                 )
             for factor in schedule:
                 stages.append(
                     gn_sub.run(
                         sub_state,
-                        "continuity",
+                        "moving windows",
                         _scaled(smoothing, factor),
                         options.max_iterations,
                         INTERMEDIATE_STEP_TOL,
@@ -504,11 +529,11 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
         start_nodes = measured if use_penalty else nodes
         state = SolverState(start_nodes.copy(), theta.copy(), active.copy(), velocity_hint=velocity)
         if use_penalty:
-            stages.append(_penalty_stage(gn, state, smoothing, options))
+            stages.append(_penalty_stage(gn, state, smoothing, options, "all windows"))
         stages.append(
             gn.run(
                 state,
-                "continuity",
+                "all windows",
                 smoothing,
                 options.max_iterations,
                 options.step_tol,

@@ -26,6 +26,9 @@ from hframe_id.fitting.fit import FitResult
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
 
+#: The project checkout (datasets inside it are recorded relative to it).
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
+
 
 def sha256_of(path: Path) -> str:
     digest = hashlib.sha256()
@@ -62,6 +65,30 @@ def make_fit_id(variant: str, dataset_hashes: list[str], when: datetime) -> str:
     return f"{variant}-{when.strftime('%Y%m%dT%H%M%SZ')}-{data}"
 
 
+def unused_fit_id(out_dir: Path, fit_id: str) -> str:
+    """``fit_id``, or ``fit_id-2``, ``-3``, ... if ``out_dir`` holds any file of that id
+    already (two fits of the same data in the same second): nothing is ever overwritten,
+    the parameter file, the report and its plots alike."""
+    candidate, n = fit_id, 1
+    while any(
+        (out_dir / name).exists()
+        for name in (f"{candidate}.yaml", f"{candidate}-report.md", f"{candidate}-plots")
+    ):
+        n += 1
+        candidate = f"{fit_id}-{n}"
+    return candidate
+
+
+def _portable(path: Path) -> str:
+    """A dataset's path as provenance: relative to the project root when inside it (the
+    same on every clone), absolute otherwise (never relative to the working directory)."""
+    absolute = Path(path).resolve()
+    try:
+        return str(absolute.relative_to(PROJECT_ROOT))
+    except ValueError:
+        return str(absolute)
+
+
 def _number(value: float) -> float:
     return float(f"{value:.10g}")
 
@@ -88,7 +115,7 @@ def provenance(
         },
         "datasets": [
             {
-                "file": str(path),
+                "file": _portable(path),
                 "sha256": digest,
                 "samples": rec.n_samples,
                 "duration_s": _number(rec.duration_s),
@@ -170,7 +197,9 @@ def write_parameter_file(
     overwritten (``ParameterFileError``).
     """
     when = when or datetime.now(UTC)
-    fit_id = make_fit_id(result.variant, [sha256_of(p) for p in dataset_paths], when)
+    fit_id = unused_fit_id(
+        out_dir, make_fit_id(result.variant, [sha256_of(p) for p in dataset_paths], when)
+    )
     if not result.success:
         return fit_id, None
     prov = provenance(result, recordings, dataset_paths, initial_path, fit_id, when)

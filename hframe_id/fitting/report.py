@@ -74,7 +74,12 @@ def parameter_table(
             continue
         ref = thesis.values.get(est.name) if thesis else None
         diff = f"{100 * (est.estimate / ref - 1):+.2f} %" if ref else "n/a"
-        status = "yes" if est.identified else "**no** (held at initial)"
+        if not result.success:
+            status = "not assessed (fit failed)"
+        elif est.identified:
+            status = "yes"
+        else:
+            status = "**no** (held at initial)"
         if est.at_bound:
             status += ", at bound"
         cells = [
