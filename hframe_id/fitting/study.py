@@ -4,7 +4,8 @@
 A study draws, per seed, a plant that is not a shipped file (the thesis's values times
 log-uniform factors within x/÷ ``truth_spread``), simulates the standard experiments with the
 rig's sensor models (encoder quantization, laser noise and range, DAC), starts the fit from
-the truth times log-uniform factors within x/÷ ``start_factor`` for every free parameter,
+the truth times log-uniform factors within x/÷ ``start_factor`` for every free parameter (or,
+with ``from_table``, from the thesis's table the plant was drawn around, as a user would),
 and records the errors, whether each 95 % interval holds the truth, time and iterations.
 """
 
@@ -77,6 +78,7 @@ def run_trial(
     truth_spread: float = 1.3,
     options: FitOptions | None = None,
     designs=None,
+    from_table: bool = False,
 ) -> Trial:
     rng = np.random.default_rng(seed)
     truth = random_truth(variant, rng, truth_spread)
@@ -90,6 +92,9 @@ def run_trial(
             rng.uniform(-math.log(start_factor), math.log(start_factor))
         )
     start = truth.replace_values(**start_values)
+    if from_table:
+        # What a user does: start from the thesis's table the plant was drawn around.
+        start = load_parameter_file(MODELS / START_FILES[variant], variant)
     result = fit_recordings(recordings, start, options)
     errors, covered, covered_gn, identified = {}, {}, {}, {}
     z = 1.959963984540054
@@ -125,11 +130,16 @@ def main(argv=None) -> int:
     parser.add_argument("--variant", default="hframe-8")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     parser.add_argument("--start-factor", type=float, default=3.0)
+    parser.add_argument(
+        "--from-table",
+        action="store_true",
+        help="start from the thesis's table (Table 4.2 / 2.3) instead of the truth x factors",
+    )
     args = parser.parse_args(argv)
     trials = []
     for seed in args.seeds:
         t0 = time.perf_counter()
-        trial = run_trial(args.variant, seed, args.start_factor)
+        trial = run_trial(args.variant, seed, args.start_factor, from_table=args.from_table)
         trials.append(trial)
         worst = max(trial.errors, key=lambda n: abs(trial.errors[n]))
         print(
