@@ -10,7 +10,7 @@ The idler pulley (phi3) is not measured: by default its J_2, B_2, tau_c2 are hel
 start's values (here equal to the truth, so this test does not measure the bias a wrong
 idler value causes; docs/fitting.md does). Tolerance 2 % (issue 5's target for friction and
 inertia; also applied to the stiffnesses); measured worst error 0.37 % (B_1), stiffnesses
-within 0.05 %. Time printed, not asserted (measured 13 s, most of it the restarts along k2, k3).
+within 0.05 %. Time printed, not asserted (measured 27 s, most of it the restarts along k2, k3).
 """
 
 import math
@@ -67,7 +67,8 @@ def test_fresh_plants_from_starts_off_by_10_percent(seed):
     inertia); the cart's Coulomb friction F_c, seen only while the laser is valid, within
     2.55 %, more than 2 % on 5 of 10 seeds: its robust standard error is 1.3-4.9 %, so the
     pulses do not determine it to 2 %, and it is checked against its own interval instead
-    (|error| / std error measured <= 1.7; asserted < 3). Starts off by x3 fail (see docs).
+    (|error| / std error measured <= 1.7; asserted < 3). From Table 2.3: 9 of 10; from x/÷3:
+    6 of 10, the other 4 reported as failed (docs/fitting.md).
     """
     from hframe_id.fitting.study import run_trial
 
