@@ -261,9 +261,8 @@ def fit_recordings(
     # the parameters held (converges from the truth on fresh plants, where the path from the
     # measured nodes left it); if that fails, the path from the measured nodes (which fits
     # the shipped pulses from Table 2.3, where the pre-pass path stalled). docs/fitting.md.
-    attempts = [False]
-    if _unmeasured_coordinates(ms) and options.state_prepass:
-        attempts.insert(0, True)
+    unmeasured = _unmeasured_coordinates(ms) and options.state_prepass
+    attempts = [True, False] if unmeasured else [False]
     best = None
     for prepass in attempts:
         outcome = _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass)
@@ -273,7 +272,7 @@ def fit_recordings(
             break
         if best is None or state.evaluation.cost < best[0].evaluation.cost:
             best = outcome
-    if len(attempts) > 1:
+    if unmeasured:
         best = _restarts_along_unmeasured_springs(
             problem, ms, nodes, velocity, stages, counter, progress, best
         )
