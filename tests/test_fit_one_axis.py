@@ -10,7 +10,7 @@ The idler pulley (phi3) is not measured: by default its J_2, B_2, tau_c2 are hel
 start's values (here equal to the truth, so this test does not measure the bias a wrong
 idler value causes; docs/fitting.md does). Tolerance 2 % (issue 5's target for friction and
 inertia; also applied to the stiffnesses); measured worst error 0.37 % (B_1), stiffnesses
-within 0.05 %. Time printed, not asserted (measured 27 s, most of it the restarts along k2, k3).
+within 0.05 %. Time printed, not asserted (measured 18 s, most of it the restarts along k2, k3).
 """
 
 import math

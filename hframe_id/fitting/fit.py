@@ -67,8 +67,10 @@ FAST_PATH_PATIENCE = 6
 RESTART_FACTORS = (1.18, 1.4)
 RESTART_LIMIT = 16
 RESTART_MIN_GAIN = 2.0
-#: Iterations of the state-estimation pre-pass (nodes only, parameters held).
+#: Iterations of the state-estimation pre-pass (nodes only, parameters held), and the
+#: relative decrease of its merit per iteration below which it stops earlier.
 PREPASS_ITERATIONS = 30
+PREPASS_COST_RTOL = 1e-4
 
 
 @dataclass(frozen=True)
@@ -576,6 +578,7 @@ def _estimate_states(ms, nodes, velocity, theta, active, stages, progress):
             PREPASS_ITERATIONS,
             INTERMEDIATE_STEP_TOL,
             INTERMEDIATE_DEFECT_TOL,
+            cost_rtol=PREPASS_COST_RTOL,
             radius=1.0,
             penalty=PENALTY_WEIGHT,
         )
