@@ -62,7 +62,7 @@ INTERMEDIATE_DEFECT_TOL = 1.0
 #: windows straight from the start) hands over to the penalty fallback (solver.GIVE_UP_*).
 FAST_PATH_PATIENCE = 6
 #: Restarts along the stiffnesses at an unmeasured coordinate (see
-#: ``_restarts_along_unmeasured_springs``): factor, at most this many, and the cost decrease
+#: ``_restarts_along_unmeasured_springs``): factors, at most this many, and the cost decrease
 #: (chi^2 / 2 units: 2 is a likelihood-ratio of e^2) a restart must bring to be kept.
 RESTART_FACTORS = (1.18, 1.4)
 RESTART_LIMIT = 16
@@ -293,8 +293,9 @@ def _restarts_along_unmeasured_springs(
     Why: the unmeasured idler's mode (~170 Hz, set by k2 + k3) makes the output error
     multimodal along those stiffnesses, like a sinusoid's frequency. Profile of one-axis
     study seed 4 (k2 held, the rest refitted): cost 735 at the truth, local optima at
-    k2 x1.2 (790), x1.95 (752), x2.3 (768); from starts off by x/÷1.1, 9 of 10 seeds
-    converge and seed 4 stops at k2 +19 %. Each restart costs one ``_solve`` (~2-3 s).
+    k2 x1.2 (790), x1.95 (752), x2.3 (768). Without restarts, from starts off by x/÷1.1,
+    seed 4 stopped at k2 +19 % (9 of 10 right); with them 10 of 10, from Table 2.3 9 of 10,
+    from x/÷3 6 of 10 (docs/fitting.md). Each restart costs one ``_solve`` (~1 s).
     """
     state, gn, stats, held = best
     springs = _springs_at_unmeasured_coordinates(problem, ms)
@@ -367,10 +368,7 @@ def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting
     _, potential = model.energy(x, p)
     unmeasured = np.flatnonzero(~np.any(ms.c[:, : ms.nq] != 0, axis=0))
     force = ca.gradient(potential, x)[unmeasured.tolist()]
-    coupled = set()
-    for j in range(p.shape[0]):
-        if ca.depends_on(force, p[j]):
-            coupled.add(j)
+    coupled = {j for j in range(p.shape[0]) if ca.depends_on(force, p[j])}
     return [f for f, i in enumerate(problem.free) if i in coupled]
 
 
