@@ -112,6 +112,25 @@ def test_device_watchdog_drops_the_outputs_when_commands_stop():
         assert not sample.watchdog and abs(sample.applied_v[0] - 1.0) < 0.01
 
 
+def test_device_cuts_the_outputs_on_a_limit_switch_whatever_the_host_commands():
+    # Limit switch 2 mm from the start: -6 V y-motion reaches y_max within ~0.1 s. The host
+    # here keeps commanding -6 V (a host without the logger's own limit check).
+    with emulator("--lockstep", "--travel", "y", "-0.25", "0.002") as port, SerialRig(port) as rig:
+        rig.start()
+        samples = [rig.read()]
+        for _ in range(300):
+            rig.set_voltages(samples[-1].sequence, [-6.0, -6.0])
+            samples.append(rig.read())
+    closed = [i for i, s in enumerate(samples) if any(s.limits.values())]
+    assert closed, "the stage never reached the limit switch"
+    first = closed[0]
+    assert samples[first].limits["y_max"]
+    assert samples[first].applied_v == pytest.approx((-6.0, -6.0), abs=0.01)
+    # from the next interval on: 0 V, latched even if the stage comes off the switch
+    assert all(s.applied_v == (0.0, 0.0) for s in samples[first + 1 :])
+    assert samples[-1].command_sequence == samples[-2].sequence  # commands still arrive
+
+
 def test_real_time_run_records_every_sample(tmp_path):
     with emulator() as port, SerialRig(port) as rig:
         summary = run_experiment(rig, STEP, RunOptions(out=tmp_path / "rt.mcap"))

@@ -3,8 +3,9 @@
 ``python -m hframe_id.rig.emulator --params models/hframe-8-table4.2.yaml`` opens a
 pseudo-terminal, prints ``PORT <path>`` and then behaves like the rig's firmware
 (docs/serial-protocol.md): it answers HELLO with INFO, and after START samples every period on
-its own clock, streams SAMPLE frames, applies the newest COMMAND at each tick and drops the
-outputs to 0 V when commands stop for the watchdog time. Its device clock is the ideal one of
+its own clock, streams SAMPLE frames, applies the newest COMMAND at each tick, drops the
+outputs to 0 V when commands stop for the watchdog time and cuts them (latched until STOP) from
+the tick after a limit switch reads closed. Its device clock is the ideal one of
 a crystal (k x period); the plant is stepped exactly one period per tick.
 
 Modes: real time (default, like hardware) or ``--lockstep`` (a test aid: after each sample it
@@ -126,15 +127,19 @@ class Emulator:
         n_in = len(plant.info.inputs)
         plant.start()
         command: tuple[int, int, int] | None = None
+        # A closed limit switch cuts the outputs, latched until STOP, whatever the host sends
+        # (the firmware's own protection; the host logger aborts the run as well).
+        limit_cut = False
         last_command_at = time.perf_counter()
         t0 = time.perf_counter()
         k = 0
         while True:
             tripped = time.perf_counter() - last_command_at > watchdog
             if command is not None:  # before the first command the outputs are at 0 V
-                codes = (zero_code, zero_code) if tripped else command[1:]
+                codes = (zero_code, zero_code) if tripped or limit_cut else command[1:]
                 plant.set_voltages(command[0], sensors.dac_volts(np.array(codes[:n_in])))
             sample = plant.read()
+            limit_cut = limit_cut or any(sample.limits.values())
             if args.disconnect_after and k >= args.disconnect_after:
                 os.close(self.fd)
                 raise SystemExit(0)
