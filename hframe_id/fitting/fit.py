@@ -417,7 +417,7 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
         # Also when the stage did not converge, if the fit is at the noise level: a sloppy
         # direction (a parameter the data hardly determine) is the usual reason, and holding
         # it lets the rest converge. Far from a fit, error estimates mean nothing: fail.
-        if not stages[-1].converged and _residual_rms_ratio(ms, state) > MISFIT:
+        if not stages[-1].converged and ms.residual_rms(state.evaluation.cost) > MISFIT:
             break
         active_idx = np.flatnonzero(state.active)
         worst = int(np.argmax(stats.relative_std))
@@ -546,12 +546,6 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
     return state, gn
 
 
-def _residual_rms_ratio(ms: MultipleShooting, state: SolverState) -> float:
-    """Residual rms over the valid samples, in units of each channel's noise std."""
-    n_valid = max(int(np.count_nonzero(ms.weight)), 1)
-    return math.sqrt(2 * state.evaluation.cost / n_valid)
-
-
 def _unmeasured_coordinates(ms: MultipleShooting) -> bool:
     """Whether some coordinate is measured by no output (one-axis: the idler pulley)."""
     seen = np.any(ms.c[:, : ms.nq] != 0, axis=0)
@@ -644,7 +638,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
     not_identified = tuple(n for n in problem.free_names if n in held)
     if not_identified:
         _which_experiments(problem, ms, gn, state, stats, estimates, not_identified)
-    misfit = _residual_rms_ratio(ms, state)
+    misfit = ms.residual_rms(state.evaluation.cost)
     too_far = misfit > options.max_misfit
     success = final.converged and not at_bound and not too_far
     if not final.converged:

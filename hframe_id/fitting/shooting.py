@@ -165,6 +165,12 @@ class MultipleShooting:
         view.frozen_substeps = None
         return view
 
+    def residual_rms(self, cost: float) -> float:
+        """Residual rms over the valid samples, in units of each channel's noise std, of a
+        cost 1/2 sum(residual^2) (about 1 for a correct model on sim-rig data)."""
+        n_valid = max(int(np.count_nonzero(self.weight)), 1)
+        return math.sqrt(2 * cost / n_valid)
+
     def moving_windows(self, velocity: np.ndarray, smoothing, margin: int = 1) -> np.ndarray:
         """Indices of windows in which some coordinate moves faster than 20 smoothing
         velocities (from a velocity estimate (W, M + 1, n_q)), widened by ``margin``
