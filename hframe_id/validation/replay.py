@@ -1,0 +1,123 @@
+"""A recording replayed through a model: measured and simulated outputs on the model's channels.
+
+Inputs are the voltages the plant saw: the commanded ones through the rig's DAC
+(``hframe_id.fitting.problem.applied_inputs``); the amplifier gains g_i are parameters of the
+model and act inside it. The simulation starts at rest at the first measured positions, as the
+fitter's first node does for a record with a pre-roll: measured coordinates take their
+measurement, the others (an idler pulley, a laser without a reading) the belt-free (rigid)
+motion that fits the measured ones best; every velocity is zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hframe_id.fitting.problem import (
+    applied_inputs,
+    default_channel_std,
+    output_matrix,
+    rigid_modes,
+)
+from hframe_id.models import Model, build_model
+from hframe_id.parameters import ParameterSet
+from hframe_id.recordings.recording import Recording
+from hframe_id.simulation.open_loop import simulate
+
+
+@dataclass(frozen=True)
+class Channels:
+    """A recording's data on a model's output channels (model output order, SI).
+
+    Attributes
+    ----------
+    names, units : output names and SI units (``phi1`` [rad], ``x`` [m], ...).
+    measured : (N, n_y) measurements, NaN where not valid.
+    valid : (N, n_y) True where a sample may be used (``Recording.valid`` and finite).
+    inputs : (N, n_u) voltages the plant saw [V] (after the DAC).
+    noise_std : (n_y,) sensor noise std from the rig metadata [rad or m]: weights of the
+        channels in state estimation.
+    sample_period_s : sample period [s].
+    """
+
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    measured: np.ndarray
+    valid: np.ndarray
+    inputs: np.ndarray
+    noise_std: np.ndarray
+    sample_period_s: float
+
+
+def channels(model: Model, recording: Recording) -> Channels:
+    """The recording's measurements on ``model``'s outputs (checked by ``checks.check_signals``)."""
+    names = tuple(s.name for s in model.outputs)
+    columns = [list(recording.output_names).index(name) for name in names]
+    measured = np.asarray(recording.outputs, dtype=float)[:, columns]
+    valid = np.asarray(recording.valid, dtype=bool)[:, columns] & np.isfinite(measured)
+    return Channels(
+        names=names,
+        units=tuple(s.unit for s in model.outputs),
+        measured=np.where(valid, measured, np.nan),
+        valid=valid,
+        inputs=applied_inputs(recording),
+        noise_std=np.array([default_channel_std(recording, name) for name in names]),
+        sample_period_s=float(recording.sample_period_s),
+    )
+
+
+def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
+    """(N, n_q) coordinates [m or rad] at every sample from the measurements alone.
+
+    Per sample, the rigid-mode amplitudes are fitted to the valid outputs (weighted by the
+    sensor noise); coordinates measured directly then take their measurement. A sample with
+    fewer valid outputs than rigid modes keeps the previous sample's positions (zero at the
+    start).
+    """
+    nq = model.n_states // 2
+    c = output_matrix(model)[:, :nq]
+    modes = rigid_modes(model, p)
+    y = np.where(data.valid, data.measured, 0.0)
+    positions = np.zeros((y.shape[0], nq))
+    enough = np.count_nonzero(data.valid, axis=1) >= modes.shape[1]
+    patterns, group = np.unique(data.valid, axis=0, return_inverse=True)
+    for g, used in enumerate(patterns):
+        ks = np.flatnonzero((group.ravel() == g) & enough)
+        if ks.size:
+            # Samples with the same valid channels share the design: one solve for all.
+            w = used / data.noise_std
+            coef, *_ = np.linalg.lstsq((c @ modes) * w[:, None], (y[ks] * w).T, rcond=None)
+            positions[ks] = (modes @ coef).T
+    for k in np.flatnonzero(~enough):
+        positions[k] = positions[k - 1] if k else 0.0
+    for j in range(c.shape[0]):
+        row = np.flatnonzero(c[j])
+        if row.size == 1 and c[j, row[0]] == 1.0:
+            positions[data.valid[:, j], row[0]] = data.measured[data.valid[:, j], j]
+    return positions
+
+
+def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
+    """(n_x,) state at rest at the first sample's measured positions (velocities zero)."""
+    x0 = np.zeros(model.n_states)
+    x0[: model.n_states // 2] = measured_positions(model, p, data)[0]
+    return x0
+
+
+def simulate_channels(params: ParameterSet, recording: Recording) -> tuple[Channels, np.ndarray]:
+    """The recording's channels for ``params``'s model and their open-loop simulation.
+
+    Returns
+    -------
+    data : the measured channels (``Channels``).
+    simulated : (N, n_y) simulated outputs [rad or m] at the sample instants, from rest at the
+        first measured positions under the recording's DAC voltages (zero-order hold).
+    """
+    model = build_model(params.variant)
+    p = model.parameter_vector(params.values)
+    data = channels(model, recording)
+    states = simulate(model, p, data.inputs, data.sample_period_s, x0=rest_state(model, p, data))[
+        :-1
+    ]
+    return data, states @ output_matrix(model).T
