@@ -36,6 +36,7 @@ class Channels:
     measured : (N, n_y) measurements, NaN where not valid.
     valid : (N, n_y) True where a sample may be used (``Recording.valid`` and finite).
     inputs : (N, n_u) voltages the plant saw [V] (after the DAC).
+    input_names : names of the input columns (``u1``, ``u2``).
     noise_std : (n_y,) sensor noise std from the rig metadata [rad or m]: weights of the
         channels in state estimation.
     sample_period_s : sample period [s].
@@ -46,6 +47,7 @@ class Channels:
     measured: np.ndarray
     valid: np.ndarray
     inputs: np.ndarray
+    input_names: tuple[str, ...]
     noise_std: np.ndarray
     sample_period_s: float
 
@@ -62,6 +64,7 @@ def channels(model: Model, recording: Recording) -> Channels:
         measured=np.where(valid, measured, np.nan),
         valid=valid,
         inputs=applied_inputs(recording),
+        input_names=tuple(s.name for s in model.inputs),
         noise_std=np.array([default_channel_std(recording, name) for name in names]),
         sample_period_s=float(recording.sample_period_s),
     )
