@@ -26,6 +26,7 @@ from hframe_id.cli import (
     reduce_command,
     reproduce_command,
     simulate_command,
+    validate_command,
 )
 from hframe_id.errors import HframeIdError
 
@@ -42,6 +43,7 @@ COMMAND_MODULES = (
     control_command,
     reproduce_command,
     fit_command,
+    validate_command,
 )
 
 
