@@ -3,9 +3,10 @@
 Inputs are the voltages the plant saw: the commanded ones through the rig's DAC
 (``hframe_id.fitting.problem.applied_inputs``); the amplifier gains g_i are parameters of the
 model and act inside it. The simulation starts at rest at the first measured positions, as the
-fitter's first node does for a record with a pre-roll: measured coordinates take their
-measurement, the others (an idler pulley, a laser without a reading) the belt-free (rigid)
-motion that fits the measured ones best; every velocity is zero.
+fitter's first node does for a record with a pre-roll, with the belts unstretched: the
+coordinates are the belt-free (rigid) motion that best fits the first sample's valid
+measurements, weighted by the sensors' noise (so the encoders place the motors, and the cart,
+bridge and any unmeasured idler follow); every velocity is zero.
 """
 
 from __future__ import annotations
@@ -71,12 +72,13 @@ def channels(model: Model, recording: Recording) -> Channels:
 
 
 def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
-    """(N, n_q) coordinates [m or rad] at every sample from the measurements alone.
+    """(N, n_q) belt-free coordinates [m or rad] at every sample from the measurements alone.
 
-    Per sample, the rigid-mode amplitudes are fitted to the valid outputs (weighted by the
-    sensor noise); coordinates measured directly then take their measurement. A sample with
-    fewer valid outputs than rigid modes keeps the previous sample's positions (zero at the
-    start).
+    Per sample, the amplitudes of the rigid (belt-free) motions are fitted to the valid
+    outputs, weighted by the sensor noise; the belts are taken unstretched. Not the raw
+    measurements: a laser's noise (5 um) taken as a belt stretch would move a motor by
+    5 um / r ~ 2.6e-4 rad, 50 encoder steps, once released. A sample with fewer valid outputs
+    than rigid modes keeps the previous sample's positions (zero at the start).
     """
     nq = model.n_states // 2
     c = output_matrix(model)[:, :nq]
@@ -94,10 +96,6 @@ def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarra
             positions[ks] = (modes @ coef).T
     for k in np.flatnonzero(~enough):
         positions[k] = positions[k - 1] if k else 0.0
-    for j in range(c.shape[0]):
-        row = np.flatnonzero(c[j])
-        if row.size == 1 and c[j, row[0]] == 1.0:
-            positions[data.valid[:, j], row[0]] = data.measured[data.valid[:, j], j]
     return positions
 
 
