@@ -59,7 +59,8 @@ def noisy_recording(params, volts, seed: int, name: str = "noisy.mcap") -> Recor
 @pytest.fixture(scope="module")
 def diagonal():
     # unequal voltages move both motors and both axes, so every channel varies and its fit
-    # [%] is meaningful (below ~1.5 V a motor does not overcome its Coulomb torque: fit ~96 % on noise)
+    # [%] is meaningful (below ~1.5 V a motor does not overcome its Coulomb torque: its
+    # angle barely moves and its fit is ~96 % on noise alone)
     return noisy_recording(TABLE, _steps(-4.0, 2.5), seed=1)
 
 

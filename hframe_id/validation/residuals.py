@@ -70,10 +70,10 @@ def _centred(signal: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 def _test(lags: np.ndarray, values: np.ndarray, tested: np.ndarray, n: int) -> CorrelationTest:
     band = band_99(n)
-    if not np.all(np.isfinite(values)):
-        return CorrelationTest(lags, values, band, 0, allowed_outside(int(tested.sum())), None)
-    outside = int(np.count_nonzero(np.abs(values[tested]) > band))
     allowed = allowed_outside(int(tested.sum()))
+    if not np.all(np.isfinite(values)):
+        return CorrelationTest(lags, values, band, 0, allowed, None)
+    outside = int(np.count_nonzero(np.abs(values[tested]) > band))
     return CorrelationTest(lags, values, band, outside, allowed, outside <= allowed)
 
 
