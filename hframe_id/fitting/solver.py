@@ -61,6 +61,8 @@ FREE_STEPS = 2
 #: in 0.9 s.
 GIVE_UP_DECREASE = 0.2
 GIVE_UP_NOISE_RATIO = 10.0
+#: Share of the removed l1 penalty a full exact-stage step must predict as merit decrease.
+MERIT_RHO = 0.1
 #: Textbook relative std (of log p) above which a parameter is not moved in an iteration.
 SLOPPY_STD = 0.5
 #: Floor of the Marquardt scaling, relative to the largest diagonal entry of the block.
@@ -133,6 +135,19 @@ def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.
         if hi <= lo * (1 + 1e-6):
             break
     return step(hi), False
+
+
+def _penalty_parameter(mu: float, change: float, l1: float) -> float:
+    """The l1 penalty parameter for a step that closes the linearised defects.
+
+    The step changes the model cost by ``change`` (chi^2 / 2 units) and removes the defects
+    ``l1`` = |defects|_1 (noise units). It must predict a merit decrease of at least
+    ``MERIT_RHO`` times the penalty removed (Nocedal & Wright, eq. 18.36): mu is raised to
+    ``change / ((1 - MERIT_RHO) l1)`` where it is smaller, and never lowered.
+    """
+    if l1 <= 0 or change <= (1 - MERIT_RHO) * mu * l1:
+        return mu
+    return change / ((1 - MERIT_RHO) * l1)
 
 
 def _determined(h_red: np.ndarray) -> np.ndarray:
@@ -436,10 +451,18 @@ class GaussNewton:
         message = f"not converged in {max_iterations} iterations"
         iterations = 0
 
+        # Exact stages: the l1 exact penalty cost + mu |defects|_1 (noise units), mu raised
+        # so that every full step predicts a decrease (see ``_penalty_parameter``): unlike a
+        # fixed quadratic penalty, whose minimiser leaves defects of the size of the
+        # multipliers (hundreds of noise std when the model cannot follow the data), its
+        # minimiser is the continuous trajectory. Penalty stages: the quadratic penalty.
+        mu = [1.0]
+
         def merit(ev_, nodes_):
-            weight = 1.0 if penalty is None else penalty
             defects = ms.defects(ev_, nodes_, self.links)
-            return ev_.cost + 0.5 * weight * float(np.sum(defects**2))
+            if penalty is None:
+                return ev_.cost + mu[0] * float(np.sum(np.abs(defects)))
+            return ev_.cost + 0.5 * penalty * float(np.sum(defects**2))
 
         best = (merit(ev, state.nodes), state.nodes, state.theta, ev)
         best_history = []
@@ -494,6 +517,12 @@ class GaussNewton:
                 theta_new = state.theta + dtheta
                 nodes_new = state.nodes + dnodes
                 if penalty is None:
+                    l1 = float(np.sum(np.abs(ms.defects(ev, state.nodes, self.links))))
+                    raised = _penalty_parameter(mu[0], change, l1)
+                    if raised > mu[0]:
+                        mu[0] = raised
+                        current = merit(ev, state.nodes)
+                        best = (merit(best[3], best[1]),) + best[1:]
                     # Cost along the step, defects linearly closed (exact continuity).
                     predicted = current - (ev.cost + change)
                 else:
@@ -531,14 +560,14 @@ class GaussNewton:
                     # The defect-closing part of the step is not limited by the trust region
                     # (it is not a parameter step): shorten the whole step instead.
                     rjd, jdjd = self.model_terms
-                    d2 = 2 * (current - ev.cost)  # |defects|^2 in the merit
+                    penalty_now = current - ev.cost  # mu |defects|_1 in the merit
                     for alpha in (0.5, 0.25, 0.125):
                         nodes_a = state.nodes + alpha * dnodes
                         theta_a = state.theta + alpha * dtheta
                         trial_a = self._evaluate(state, nodes_a, theta_a, smoothing)
                         new_a = merit(trial_a, nodes_a)
                         model = ev.cost + alpha * rjd + 0.5 * alpha**2 * jdjd
-                        predicted_a = current - (model + 0.5 * (1 - alpha) ** 2 * d2)
+                        predicted_a = current - (model + (1 - alpha) * penalty_now)
                         if (
                             np.isfinite(new_a)
                             and predicted_a > 0
