@@ -9,6 +9,8 @@ edges fall on whole samples whatever the float rounding of k T. Three kinds:
   0.25 s pulses of 5 V and 10 V).
 - ``SequenceProtocol``: an arbitrary sequence read from CSV (``time [s]``, ``u1 [V]``[, ``u2
   [V]``]), held from each row's time to the next one's.
+- ``MultisineProtocol``: a seeded, band-limited random-phase multisine per motor (a richer
+  excitation than steps, docs/realistic-rig.md).
 """
 
 from __future__ import annotations
@@ -207,6 +209,90 @@ class SequenceProtocol:
             "protocol.sha256": self.sha256,
             "protocol.rows": len(self.time_s),
             "protocol.duration_s": self.duration_s if self.duration_s is not None else "",
+        }
+
+
+@dataclass(frozen=True)
+class MultisineProtocol:
+    """A band-limited random-phase multisine on every motor (0 V during the pre-roll).
+
+    Component i has frequency f_i = i / period_s for f_min_hz <= f_i <= f_max_hz; the
+    components are dealt out to the motors in turn (motor m gets i = m, m + n, m + 2n, ... of
+    the band), so that each frequency excites one motor only and the motors' signals are
+    uncorrelated over a period. Motor m's voltage is
+
+        u_m(t) = a_m sum_{i in I_m} cos(2 pi f_i t + theta_i),  a_m = rms_v sqrt(2 / |I_m|)
+
+    (RMS ``rms_v`` over whole periods), t from the end of the pre-roll, with phases theta_i
+    drawn uniformly from [0, 2 pi) by ``numpy.random.default_rng(seed)``. Without components
+    below f_min_hz the stage (an integrator from voltage to position) stays near its start.
+
+    Attributes
+    ----------
+    rms_v : RMS voltage per motor [V].
+    f_min_hz, f_max_hz : band [Hz].
+    period_s : period [s] (frequency resolution 1 / period_s).
+    duration_s : record duration [s].
+    pre_roll_s : 0 V recorded first [s].
+    seed : phase seed.
+    n_inputs : motors of the rig.
+    """
+
+    rms_v: float
+    f_min_hz: float
+    f_max_hz: float
+    period_s: float
+    duration_s: float
+    pre_roll_s: float = 0.05
+    seed: int = 0
+    n_inputs: int = 2
+    name: str = field(default="multisine", init=False)
+
+    def __post_init__(self) -> None:
+        _check_volts("multisine rms", self.rms_v)
+        for label, value in (("f_min_hz", self.f_min_hz), ("f_max_hz", self.f_max_hz),
+                             ("period_s", self.period_s)):  # fmt: skip
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise OptionError(f"multisine {label} must be > 0, got {value!r}")
+        if self.n_inputs < 1:
+            raise OptionError(f"multisine needs >= 1 motor, got {self.n_inputs}")
+        if len(self._components()) < self.n_inputs:
+            raise OptionError(
+                f"multisine band {self.f_min_hz}-{self.f_max_hz} Hz holds fewer than one "
+                f"{1 / self.period_s:g} Hz component per motor; widen it or lengthen the period"
+            )
+        StepProtocol((self.rms_v,), 0.0, self.duration_s, self.pre_roll_s)
+
+    def _components(self) -> np.ndarray:
+        """Harmonic numbers i of the band (f_i = i / period_s)."""
+        first = math.ceil(self.f_min_hz * self.period_s - 1e-9)
+        last = math.floor(self.f_max_hz * self.period_s + 1e-9)
+        return np.arange(max(first, 1), last + 1)
+
+    def table(self, period_s: float) -> np.ndarray:
+        n = _samples("duration", self.duration_s, period_s, minimum=1)
+        start = _samples("pre-roll", self.pre_roll_s, period_s)
+        harmonics = self._components()
+        phases = np.random.default_rng(self.seed).uniform(0.0, 2 * np.pi, harmonics.size)
+        t = np.arange(n - start) * period_s
+        table = np.zeros((n, self.n_inputs))
+        for m in range(self.n_inputs):
+            mine = slice(m, None, self.n_inputs)
+            angles = np.outer(t, 2 * np.pi * harmonics[mine] / self.period_s) + phases[mine]
+            amplitude = self.rms_v * math.sqrt(2.0 / harmonics[mine].size)
+            table[start:, m] = amplitude * np.cos(angles).sum(axis=1)
+        return table
+
+    def metadata(self) -> dict[str, Any]:
+        return {
+            "protocol": self.name,
+            "protocol.rms_V": self.rms_v,
+            "protocol.f_min_Hz": self.f_min_hz,
+            "protocol.f_max_Hz": self.f_max_hz,
+            "protocol.period_s": self.period_s,
+            "protocol.duration_s": self.duration_s,
+            "protocol.pre_roll_s": self.pre_roll_s,
+            "protocol.seed": self.seed,
         }
 
 

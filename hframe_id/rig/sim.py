@@ -6,11 +6,17 @@ models, drawing random numbers in the same order as ``hframe_id.recordings.simul
 with a given seed and inputs equals ``simulate_recording`` with that seed and inputs (to float
 round-off). Paced in real time by default (``read()`` returns at the sample's wall time, like
 hardware); ``paced=False`` runs as fast as it can (making datasets).
+
+Given a ``Plant`` (``hframe_id.rig.plant``, docs/realistic-rig.md) instead of a parameter set,
+the rig is the realistic one: the plant's own dynamics (stick-slip with a Stribeck curve,
+current-limited amplifier, position-dependent belt stiffness), its actuation delay and its
+sensor latencies; it then equals ``hframe_id.rig.realistic.record_realistic``.
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Sequence
 
 import casadi as ca
@@ -25,7 +31,9 @@ from hframe_id.recordings.log_format import PLANT_ATTACHMENT
 from hframe_id.recordings.sensors import SensorModel, SensorReadout
 from hframe_id.recordings.writer import Attachment
 from hframe_id.rig.interface import LinkStats, Rig, RigInfo, RigSample
+from hframe_id.rig.plant import PLANT_FILE_ATTACHMENT, REFERENCE_ATTACHMENT, Plant, plant_text
 from hframe_id.simulation.integrators import rk4_step, stable_substeps
+from hframe_id.simulation.realistic import realistic_step
 
 #: Limit switch positions [m] of the simulated rigs (the thesis gives no travel; these keep
 #: every shipped experiment clear of them with margin).
@@ -37,7 +45,8 @@ class SimRig(Rig):
 
     Parameters
     ----------
-    params : plant parameters (any model variant).
+    params : plant parameters (any model variant, the model's own smooth friction), or a
+        realistic ``Plant``.
     sensors : sensor models (default: the thesis's rig, section 1.1).
     seed : seeds the encoder power-up phases and the laser noise.
     sample_period_s : sample period [s].
@@ -48,7 +57,7 @@ class SimRig(Rig):
 
     def __init__(
         self,
-        params: ParameterSet,
+        params: ParameterSet | Plant,
         *,
         sensors: SensorModel | None = None,
         seed: int = 0,
@@ -59,15 +68,23 @@ class SimRig(Rig):
     ) -> None:
         if not sample_period_s > 0:
             raise OptionError(f"sample period must be > 0 s, got {sample_period_s}")
-        self.params = params
+        self.plant = params if isinstance(params, Plant) else None
+        self.params = params.parameters if isinstance(params, Plant) else params
         self.sensors = sensors or SensorModel()
         self.seed = int(seed)
         self.paced = bool(paced)
-        self.model = build_model(params.variant)
-        self._p = self.model.parameter_vector(params.values)
-        self._s = ca.DM(self.model.options.smoothing)
-        n = n_substeps or stable_substeps(self.model, self._p, sample_period_s)
-        self._step = rk4_step(self.model, int(n), float(sample_period_s))
+        if self.plant is None:
+            self.model = build_model(self.params.variant)
+            self._p = self.model.parameter_vector(self.params.values)
+            self._s = ca.DM(self.model.options.smoothing)
+            n = n_substeps or stable_substeps(self.model, self._p, sample_period_s)
+            self._step = rk4_step(self.model, int(n), float(sample_period_s))
+        else:
+            self.model, self._p = self.plant.model, self.plant.p
+            self._s = ca.DM(self.plant.constants.vector())
+            n = n_substeps or self.plant.substeps(sample_period_s)
+            self._step = realistic_step(self.model, int(n), float(sample_period_s))
+        params = self.params
         outputs = tuple(s.name for s in self.model.outputs)
         axes = [a for a in ("x", "y") if a in outputs]
         travel = travel_m if travel_m is not None else {a: DEFAULT_TRAVEL_M[a] for a in axes}
@@ -93,6 +110,7 @@ class SimRig(Rig):
                 "paced": self.paced,
                 "plant_parameters": params.path.name if params.path else params.title,
                 "rk4_substeps": int(n),
+                **(self._plant_metadata() if self.plant else {}),
             },
         )
         self.stats = LinkStats()
@@ -103,6 +121,10 @@ class SimRig(Rig):
         self._readout = SensorReadout(self.sensors, self.info.outputs, self._rng)
         self._x = np.zeros(self.model.n_states)
         self._applied = np.zeros(self.model.n_inputs)
+        delay, (encoder_lag, laser_lag) = self._delays()
+        self._pending = deque([self._applied] * delay)
+        self._outputs = deque(maxlen=max(encoder_lag, laser_lag) + 1)
+        self._output_now = self._applied
         self._command_sequence: int | None = None
         self._k = 0
         self._t0 = time.perf_counter()
@@ -113,13 +135,15 @@ class SimRig(Rig):
             raise RigFault("sim rig: read() before start()")
         k = self._k
         if k > 0:
-            self._x = np.asarray(self._step(self._x, self._applied, self._p, self._s)).ravel()
+            self._pending.append(self._applied)
+            self._output_now = self._pending.popleft()
+            self._x = np.asarray(self._step(self._x, self._output_now, self._p, self._s)).ravel()
         if self.paced:
             delay = self._t0 + k * self.info.sample_period_s - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
         y = np.asarray(self.model.output(self._x)).ravel()
-        counts, laser, valid = self._readout.read(y)
+        counts, laser, valid = self._readout.read(self._lagged(y))
         limits = {}
         for axis, column in self._axis_columns.items():
             low, high = self.info.travel_m[axis]
@@ -133,7 +157,7 @@ class SimRig(Rig):
             laser_m=tuple(float(v) for v in laser),
             laser_valid=tuple(bool(v) for v in valid),
             limits={name: limits[name] for name in self.info.limit_switches},
-            applied_v=tuple(float(v) for v in self._applied),
+            applied_v=tuple(float(v) for v in self._output_now),
             command_sequence=self._command_sequence,
             watchdog=False,
             received_s=time.perf_counter(),
@@ -157,7 +181,47 @@ class SimRig(Rig):
         text = yaml.safe_dump(
             to_document(self.params), sort_keys=False, allow_unicode=True, width=100
         )
-        return [Attachment(PLANT_ATTACHMENT, "application/yaml", text.encode())]
+        files = [Attachment(PLANT_ATTACHMENT, "application/yaml", text.encode())]
+        if self.plant is not None:
+            files.append(
+                Attachment(
+                    PLANT_FILE_ATTACHMENT, "application/yaml", plant_text(self.plant).encode()
+                )
+            )
+            reference = yaml.safe_dump(
+                to_document(self.plant.reference()), sort_keys=False, allow_unicode=True, width=100
+            )
+            files.append(Attachment(REFERENCE_ATTACHMENT, "application/yaml", reference.encode()))
+        return files
+
+    def _delays(self) -> tuple[int, tuple[int, int]]:
+        """Actuation delay and (encoder, laser) latency [samples]; 0 for a parameter set."""
+        if self.plant is None:
+            return 0, (0, 0)
+        plant = self.plant
+        return plant.actuation_delay_samples, (
+            plant.encoder_latency_samples,
+            plant.laser_latency_samples,
+        )
+
+    def _lagged(self, y: np.ndarray) -> np.ndarray:
+        """The outputs the sensors see now: each channel its latency old (rest before t_0)."""
+        _, (encoder_lag, laser_lag) = self._delays()
+        if not self._outputs:
+            self._outputs.extend([y] * self._outputs.maxlen)
+        self._outputs.append(y)
+        seen = y.copy()
+        readout = self._readout
+        seen[readout.encoder_columns] = self._outputs[-1 - encoder_lag][readout.encoder_columns]
+        seen[readout.laser_columns] = self._outputs[-1 - laser_lag][readout.laser_columns]
+        return seen
+
+    def _plant_metadata(self) -> dict:
+        plant = self.plant
+        meta: dict = {"plant": plant.path.name if plant.path else plant.title}
+        if plant.seed is not None:
+            meta["plant_seed"] = plant.seed
+        return meta
 
     @property
     def state(self) -> np.ndarray:

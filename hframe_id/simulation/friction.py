@@ -110,6 +110,41 @@ def friction_sites(model: Model) -> tuple[FrictionSite, ...]:
     )
 
 
+def stick_slip_force(
+    rate: ca.SX,
+    active: ca.SX,
+    viscous: ca.SX,
+    coulomb: ca.SX,
+    static: ca.SX,
+    width: ca.SX,
+    stribeck_velocity: ca.SX | float = 1.0,
+    hold: ca.SX | float = 0.0,
+) -> ca.SX:
+    """Friction force [N or N m] on one coordinate: Table 2.2's logic with a Stribeck curve.
+
+    Stuck (``|v| <= width`` and ``|F_a| <= F_s``): F_f = F_a + hold. Slipping:
+
+        F_f = b v + sign(v) (F_c + (F_s - F_c) exp(-(v / v_St)^2))
+
+    (docs/realistic-rig.md, eq. S1-S2). With F_s = F_c and hold = 0 it is Table 2.2 exactly
+    (the Stribeck term is 0, and ``stribeck_velocity`` is then irrelevant).
+
+    Parameters
+    ----------
+    rate : coordinate velocity v [m/s or rad/s].
+    active : every other generalized force on the coordinate, F_a [N or N m].
+    viscous, coulomb, static : b [N s/m or N m s/rad], F_c and breakaway F_s [N or N m].
+    width : stick band [m/s or rad/s].
+    stribeck_velocity : v_St [m/s or rad/s].
+    hold : extra force while stuck [N or N m] (the realistic plant brings a stuck coordinate
+        to rest with it; Table 2.2 has none, so a coordinate can stick at up to +/- width).
+    """
+    level = coulomb + (static - coulomb) * ca.exp(-((rate / stribeck_velocity) ** 2))
+    slipping = viscous * rate + ca.sign(rate) * level
+    stuck = ca.logic_and(ca.fabs(rate) <= width, ca.fabs(active) <= static)
+    return ca.if_else(stuck, active + hold, slipping)
+
+
 @lru_cache(maxsize=32)
 def stick_slip_dynamics(model: Model) -> ca.Function:
     """xdot = f(x, u, p, band) with Table 2.2's friction on every friction-bearing coordinate."""
@@ -128,11 +163,9 @@ def stick_slip_dynamics(model: Model) -> ca.Function:
     friction = [ca.SX(0)] * n_q
     for site in sites:
         j = site.coordinate
-        rate, viscous, coulomb = x[n_q + j], p[site.viscous], p[site.coulomb]
+        rate, coulomb = x[n_q + j], p[site.coulomb]
         width = band[0] if site.linear else band[1]
-        slipping = viscous * rate + ca.sign(rate) * coulomb
-        stuck = ca.logic_and(ca.fabs(rate) <= width, ca.fabs(active[j]) <= coulomb)
-        friction[j] = ca.if_else(stuck, active[j], slipping)
+        friction[j] = stick_slip_force(rate, active[j], p[site.viscous], coulomb, coulomb, width)
     qddot = free[n_q:] - ca.solve(mass, ca.vertcat(*friction))
     return ca.Function(
         "stick_slip_dynamics",
