@@ -11,7 +11,12 @@ from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
 from hframe_id.recordings.writer import Attachment
 from hframe_id.rig.logger import RunOptions, run_experiment
-from hframe_id.rig.protocols import PulseProtocol, StepProtocol, load_sequence_csv
+from hframe_id.rig.protocols import (
+    MultisineProtocol,
+    PulseProtocol,
+    StepProtocol,
+    load_sequence_csv,
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,6 +31,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rig = parser.add_argument_group("rig")
     rig.add_argument("--rig", choices=("sim", "serial"), required=True, help="rig backend")
     rig.add_argument("--params", type=Path, help="sim: plant parameter file (models/*.yaml)")
+    rig.add_argument(
+        "--plant",
+        type=Path,
+        help="sim: realistic plant file instead of --params (docs/realistic-rig.md)",
+    )
     rig.add_argument("--seed", type=int, default=0, help="sim: sensor noise seed (default 0)")
     rig.add_argument(
         "--fast",
@@ -52,7 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="serial: link fault after this long without a sample [s] (default 0.1)",
     )
     proto = parser.add_argument_group("protocol")
-    proto.add_argument("--protocol", choices=("step", "pulse", "csv"), default="step")
+    proto.add_argument("--protocol", choices=("step", "pulse", "csv", "multisine"), default="step")
     proto.add_argument("--v1", type=float, help="step: motor 1 voltage [V]")
     proto.add_argument("--v2", type=float, help="step: motor 2 voltage [V] (H-frame)")
     proto.add_argument("--step", type=float, default=0.5, help="step: duration [s] (0.5)")
@@ -60,17 +70,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     proto.add_argument("--width", type=float, default=0.25, help="pulse: duration [s] (0.25)")
     proto.add_argument("--motor", type=int, default=1, help="pulse: motor (1)")
     proto.add_argument("--csv", type=Path, help="csv: file with 'time [s],u1 [V][,u2 [V]]'")
+    proto.add_argument("--rms", type=float, default=3.0, help="multisine: RMS per motor [V] (3)")
+    proto.add_argument(
+        "--band",
+        type=float,
+        nargs=2,
+        default=(0.5, 10.0),
+        metavar=("F_MIN", "F_MAX"),
+        help="multisine: frequency band [Hz] (0.5 10)",
+    )
+    proto.add_argument("--period", type=float, default=2.0, help="multisine: period [s] (2)")
+    proto.add_argument("--protocol-seed", type=int, default=0, help="multisine: phase seed (0)")
     proto.add_argument(
         "--duration",
         type=float,
         default=None,
-        help="record duration [s] (step/pulse default 1.0; csv: last row + 1 sample)",
+        help="record duration [s] (step/pulse default 1.0; multisine: pre-roll + period; "
+        "csv: last row + 1 sample)",
     )
     proto.add_argument(
         "--pre-roll",
         type=float,
         default=0.05,
-        help="step/pulse: 0 V recorded before the step [s] (0.05)",
+        help="step/pulse/multisine: 0 V recorded before the excitation [s] (0.05)",
     )
     out = parser.add_argument_group("output")
     out.add_argument("--out", type=Path, required=True, help="recording to write (.mcap)")
@@ -103,6 +125,16 @@ def _protocol(args: argparse.Namespace, n_inputs: int):
             args.motor,
             n_inputs,
         )
+    if args.protocol == "multisine":
+        return MultisineProtocol(
+            args.rms,
+            *args.band,
+            args.period,
+            args.pre_roll + args.period if duration is None else duration,
+            args.pre_roll,
+            args.protocol_seed,
+            n_inputs,
+        )
     if args.csv is None:
         raise OptionError("--protocol csv needs --csv FILE")
     protocol = load_sequence_csv(args.csv, duration)
@@ -117,17 +149,25 @@ def make_rig(args: argparse.Namespace):
     if args.rig == "sim":
         from hframe_id.rig.sim import SimRig
 
-        if args.params is None:
-            raise OptionError("--rig sim needs --params (a plant parameter file)")
+        if (args.params is None) == (args.plant is None):
+            raise OptionError(
+                "--rig sim needs one of --params (a parameter file) or --plant (a plant file)"
+            )
         if args.port is not None:
             raise OptionError("--port is for --rig serial")
-        return SimRig(load_parameter_file(args.params), seed=args.seed, paced=not args.fast)
+        if args.plant is not None:
+            from hframe_id.rig.plant import load_plant_file
+
+            plant = load_plant_file(args.plant)
+        else:
+            plant = load_parameter_file(args.params)
+        return SimRig(plant, seed=args.seed, paced=not args.fast)
     from hframe_id.rig.serial_rig import SerialRig
 
     if args.port is None:
         raise OptionError("--rig serial needs --port (e.g. /dev/ttyACM0)")
-    if args.fast or args.params is not None:
-        raise OptionError("--fast and --params are for --rig sim")
+    if args.fast or args.params is not None or args.plant is not None:
+        raise OptionError("--fast, --params and --plant are for --rig sim")
     return SerialRig(
         args.port,
         baudrate=args.baudrate,

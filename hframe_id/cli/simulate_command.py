@@ -32,7 +32,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "signals (states, inputs, outputs, SI units in the column names) as CSV. Inputs: "
         "--step (repeatable), --csv or --recording.",
     )
-    parser.add_argument("--params", type=Path, required=True, help="parameter file (YAML)")
+    plant = parser.add_argument_group("plant (one of)")
+    plant.add_argument("--params", type=Path, help="parameter file (YAML)")
+    plant.add_argument(
+        "--plant",
+        type=Path,
+        help="realistic plant file (docs/realistic-rig.md): its own friction, current limit and "
+        "actuation delay; the CSV holds exact plant signals, --mcap adds sensor latency",
+    )
     parser.add_argument(
         "--variant", choices=VARIANTS, help="require the parameter file to be of this variant"
     )
@@ -65,8 +72,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--friction",
         choices=FRICTION_MODELS,
-        default="smooth",
-        help="Coulomb friction law: smooth (tanh, the model's) or stick-slip (Table 2.2)",
+        help="--params: Coulomb friction law, smooth (tanh, the model's; default) or stick-slip "
+        "(Table 2.2); a plant file has its own",
     )
     parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
     parser.add_argument("--out", type=Path, required=True, help="CSV file to write")
@@ -178,31 +185,63 @@ def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source:
     return f"wrote {args.mcap} ({summary.samples} samples, sim rig, seed {args.seed}, {state})"
 
 
+def _load_plant(args: argparse.Namespace):
+    """(plant or parameter set, its model) from --plant or --params."""
+    if (args.params is None) == (args.plant is None):
+        raise OptionError("give one of --params (a parameter file) or --plant (a plant file)")
+    if args.plant is None:
+        params = load_parameter_file(args.params, args.variant)
+        return params, build_model(params.variant)
+    from hframe_id.rig.plant import load_plant_file
+
+    if args.friction is not None:
+        raise OptionError("--friction is for --params; a plant file sets its own friction")
+    plant = load_plant_file(args.plant)
+    if args.variant is not None and plant.variant != args.variant:
+        raise OptionError(f"{args.plant}: plant is {plant.variant!r}, --variant {args.variant!r}")
+    return plant, plant.model
+
+
+def _simulate(args, plant, model, table: np.ndarray, dt: float) -> tuple[SimulationResult, int]:
+    """The CSV's signals and the RK4 substeps used."""
+    from hframe_id.rig.plant import Plant
+
+    if isinstance(plant, Plant):
+        from hframe_id.rig.realistic import run_plant
+
+        n = args.substeps or plant.substeps(dt)
+        return run_plant(plant, table, dt, n), n
+    from hframe_id.simulation.open_loop import default_substeps
+
+    friction = FrictionOptions(args.friction or "smooth")
+    if args.mcap is not None and friction.model != "smooth":
+        raise OptionError(
+            "--mcap records with the sim rig, which simulates smooth friction only (a plant "
+            "file gives it stick-slip)"
+        )
+    p = model.parameter_vector(plant.values)
+    n = args.substeps or default_substeps(model, p, dt, friction)
+    return run_open_loop(model, p, table, dt, friction=friction, n_substeps=args.substeps), n
+
+
 def run(args: argparse.Namespace) -> int:
-    params = load_parameter_file(args.params, args.variant)
-    model = build_model(params.variant)
-    friction = FrictionOptions(args.friction)
+    plant, model = _load_plant(args)
     if args.substeps is not None and args.substeps < 1:
         raise OptionError(f"--substeps must be >= 1, got {args.substeps}")
-    if args.mcap is not None and friction.model != "smooth":
-        raise OptionError("--mcap records with the sim rig, which simulates smooth friction only")
     _check_writable(args)
     table, dt, source = _inputs(args, model.n_inputs)
-    p = model.parameter_vector(params.values)
-    result = run_open_loop(model, p, table, dt, friction=friction, n_substeps=args.substeps)
+    result, n = _simulate(args, plant, model, table, dt)
     if not np.isfinite(result.states).all():
         raise OptionError("the simulation diverged (non-finite states); try more --substeps")
     _frame(result).to_csv(args.out, index=False)
-    print(f"wrote {args.out} ({table.shape[0]} samples of {dt * 1e3:g} ms, {params.variant}, "
-          f"{friction.model} friction, {source})")  # fmt: skip
+    law = "plant's" if args.plant else f"{args.friction or 'smooth'}"
+    print(f"wrote {args.out} ({table.shape[0]} samples of {dt * 1e3:g} ms, {model.variant}, "
+          f"{law} friction, {source})")  # fmt: skip
     if args.mcap is not None:
-        from hframe_id.simulation.open_loop import default_substeps
-
-        n = args.substeps or default_substeps(model, p, dt, friction)
-        print(_record(args, params, table, dt, n, source))
+        print(_record(args, plant, table, dt, n, source))
     if args.plot is not None:
         from hframe_id.simulation.plots import write_open_loop_plot
 
-        title = f"{params.variant}: {source}"
+        title = f"{model.variant}: {source}"
         print(f"wrote {write_open_loop_plot(result, args.plot / 'open_loop.png', title)}")
     return 0

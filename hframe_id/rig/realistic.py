@@ -34,6 +34,7 @@ from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.sensors import SensorModel, measure_batch, split_outputs
 from hframe_id.rig.plant import Plant
 from hframe_id.simulation.friction import STICK_BAND_ANGULAR_RAD_PER_S, STICK_BAND_LINEAR_M_PER_S
+from hframe_id.simulation.open_loop import SimulationResult
 from hframe_id.simulation.realistic import PlantConstants, simulate_realistic
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
@@ -166,11 +167,34 @@ def realistic_plant(variant: str, seed: int, spread: tuple[float, float] = (0.10
     )
 
 
-def lagged(values: np.ndarray, samples: int) -> np.ndarray:
-    """Rows shifted ``samples`` later, the first row repeated before t_0 (rest)."""
+def lagged(values: np.ndarray, samples: int, before: np.ndarray | None = None) -> np.ndarray:
+    """Rows shifted ``samples`` later; before t_0 ``before`` (default: the first row, rest)."""
     if samples == 0:
         return values
-    return np.vstack([np.repeat(values[:1], samples, axis=0), values[:-samples]])
+    first = values[:1] if before is None else np.reshape(before, (1, -1))
+    return np.vstack([np.repeat(first, samples, axis=0), values[:-samples]])
+
+
+def run_plant(
+    plant: Plant, inputs: np.ndarray, dt: float = 1e-3, n_substeps: int | None = None
+) -> SimulationResult:
+    """The plant's exact signals for held voltages (``inputs`` (N, n_u) [V], as commanded):
+    delayed by the actuation delay, no DAC and no sensors (``hframe-id simulate --plant``)."""
+    model = plant.model
+    inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+    applied = lagged(inputs, plant.actuation_delay_samples, np.zeros(model.n_inputs))
+    n = n_substeps or plant.substeps(dt)
+    states = simulate_realistic(model, plant.p, plant.constants, applied, dt, n)
+    outputs = np.array(model.output.map(states.shape[0])(states.T)).T.reshape(states.shape[0], -1)
+    return SimulationResult(
+        time_s=np.arange(states.shape[0]) * dt,
+        inputs=inputs,
+        states=states,
+        outputs=outputs,
+        state_labels=tuple(s.label for s in model.states),
+        input_labels=tuple(s.label for s in model.inputs),
+        output_labels=tuple(s.label for s in model.outputs),
+    )
 
 
 def record_realistic(
@@ -199,12 +223,14 @@ def record_realistic(
             f"the protocol drives {commanded.shape[1]} motor(s), the {plant.variant} plant has "
             f"{model.n_inputs}"
         )
-    applied = lagged(sensors.dac(commanded), plant.actuation_delay_samples)
-    if plant.actuation_delay_samples:
-        applied[: plant.actuation_delay_samples] = 0.0
+    applied = lagged(
+        sensors.dac(commanded), plant.actuation_delay_samples, np.zeros(model.n_inputs)
+    )
     states = simulate_realistic(
         model, plant.p, plant.constants, applied, sample_period_s, plant.substeps(sample_period_s)
     )[:-1]
+    if not np.isfinite(states).all():
+        raise OptionError(f"{plant.where()}: the simulation diverged (non-finite states)")
     true_outputs = np.array(model.output.map(states.shape[0])(states.T)).T
     names = tuple(s.name for s in model.outputs)
     encoders, lasers = split_outputs(names)
