@@ -13,11 +13,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "datasets",
         help="make, list or verify the shipped datasets",
         description="The thesis's open-loop experiments recorded from the sim rig with "
-        "documented truth parameters and seeds (see hframe_id/rig/datasets.py).",
+        "documented truth parameters and seeds (see hframe_id/rig/datasets.py); with "
+        "--realistic, from the realistic plants (docs/realistic-rig.md).",
     )
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     make = actions.add_parser("make", help="(re)generate truth files, recordings, manifest")
-    make.add_argument("--out", type=Path, default=Path("datasets"), help="folder (datasets)")
+    make.add_argument(
+        "--out", type=Path, help="folder (datasets; with --realistic datasets/realistic)"
+    )
+    make.add_argument(
+        "--realistic", action="store_true", help="the realistic-plant datasets instead"
+    )
     make.add_argument(
         "--only",
         nargs="+",
@@ -27,10 +33,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     make.set_defaults(handler=run_make)
     listing = actions.add_parser("list", help="list the datasets and what they are")
+    listing.add_argument("--realistic", action="store_true", help="the realistic-plant datasets")
     listing.set_defaults(handler=run_list)
     verify = actions.add_parser("verify", help="check files against the manifest's sha256")
     verify.add_argument("--dir", type=Path, default=Path("datasets"), help="folder (datasets)")
     verify.set_defaults(handler=run_verify)
+
+
+def _collection(args: argparse.Namespace):
+    from hframe_id.rig.datasets import REALISTIC, STANDARD
+
+    return REALISTIC if args.realistic else STANDARD
 
 
 def run_make(args: argparse.Namespace) -> int:
@@ -39,18 +52,17 @@ def run_make(args: argparse.Namespace) -> int:
     def report(spec, summary) -> None:
         print(f"{spec.file:<20} {summary.samples} samples, truth {spec.truth}, seed {spec.seed}")
 
-    manifest = make_datasets(args.out, args.only, progress=report)
+    out = args.out or Path("datasets/realistic" if args.realistic else "datasets")
+    manifest = make_datasets(out, args.only, progress=report, collection=_collection(args))
     print(f"manifest             {manifest}")
     return 0
 
 
 def run_list(args: argparse.Namespace) -> int:
-    from hframe_id.rig.datasets import DATASETS, TRUTHS
-
-    for spec in DATASETS:
-        print(
-            f"{spec.file:<20} {TRUTHS[spec.truth].file:<24} seed {spec.seed:<5} {spec.description}"
-        )
+    collection = _collection(args)
+    for spec in collection.datasets:
+        truth = collection.truths[spec.truth].file
+        print(f"{spec.file:<20} {truth:<30} seed {spec.seed:<5} {spec.description}")
     return 0
 
 

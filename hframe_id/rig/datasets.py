@@ -17,6 +17,11 @@ step and 1.0 s of record (steady speed is reached within ~0.3 s; the 4 V and 6 V
 the 6 V x-motion run past the lasers' 10 cm range, as in section 3.4), and the one-axis 5 V and
 10 V 0.25 s pulses of section 2.3 (50 ms pre-roll, 0.6 s record). Runs are unpaced, in
 reproducible mode, with a fixed nominal start time, so the same code gives the same bytes.
+
+``datasets/realistic/`` (``hframe-id datasets make --realistic``) holds the same experiments
+plus a multisine, recorded from the realistic plants of ``hframe_id.rig.realistic`` (plant
+files in ``plants/``, the section-4.1 reduction as the hframe-8 reference in ``truth/``;
+docs/realistic-rig.md).
 """
 
 from __future__ import annotations
@@ -33,7 +38,9 @@ import yaml
 from hframe_id.errors import OptionError, ParameterFileError
 from hframe_id.parameters import ParameterSet, load_parameter_file, save_parameter_file
 from hframe_id.rig.logger import RunOptions, RunSummary, run_experiment
-from hframe_id.rig.protocols import PulseProtocol, StepProtocol
+from hframe_id.rig.plant import Plant, load_plant_file, save_plant_file
+from hframe_id.rig.protocols import MultisineProtocol, PulseProtocol, StepProtocol
+from hframe_id.rig.realistic import shipped_plant
 from hframe_id.rig.sim import SimRig
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
@@ -57,6 +64,11 @@ class TruthSpec:
     @property
     def file(self) -> str:
         return f"truth/{self.name}.yaml"
+
+    def write(self, out: Path) -> tuple[ParameterSet, dict[str, str]]:
+        """Write the truth file into ``out``; the set as read back, and manifest fields."""
+        path = save_parameter_file(self.build(), out / self.file, overwrite=True)
+        return load_parameter_file(path), {}
 
     def build(self, models_dir: Path = MODELS_DIR) -> ParameterSet:
         base = load_parameter_file(models_dir / self.base)
@@ -106,24 +118,65 @@ TRUTHS = {
 
 
 @dataclass(frozen=True)
+class PlantSpec:
+    """A realistic plant file (``hframe_id.rig.realistic.shipped_plant``) and its reference."""
+
+    name: str
+    variant: str
+
+    @property
+    def file(self) -> str:
+        return f"plants/{self.name}.yaml"
+
+    @property
+    def reference_file(self) -> str:
+        reduced = "hframe-8-reduced" if self.variant == "hframe-20" else self.variant
+        return f"truth/{reduced}.yaml"
+
+    def write(self, out: Path) -> tuple[Plant, dict[str, str]]:
+        """Write the plant and its reference into ``out``; the plant read back, manifest fields."""
+        plant = shipped_plant(self.variant)
+        path = save_plant_file(plant, out / self.file, overwrite=True)
+        reference = save_parameter_file(
+            plant.reference(), out / self.reference_file, overwrite=True
+        )
+        fields = {"reference": self.reference_file, "reference_sha256": sha256(reference)}
+        return load_plant_file(path), fields
+
+
+PLANTS = {p.name: p for p in (PlantSpec("hframe-realistic", "hframe-20"),
+                              PlantSpec("one-axis-realistic", "one-axis"))}  # fmt: skip
+
+
+@dataclass(frozen=True)
 class DatasetSpec:
     """One shipped recording."""
 
     file: str
     truth: str
-    protocol: StepProtocol | PulseProtocol
+    protocol: StepProtocol | PulseProtocol | MultisineProtocol
     seed: int
     description: str
 
 
-def _hframe(volts: int, motion: str, seed: int) -> DatasetSpec:
+def _hframe(volts: int, motion: str, seed: int, truth: str = "hframe-8-rig") -> DatasetSpec:
     v2 = -volts if motion == "y" else volts
     return DatasetSpec(
         f"{volts}V_{motion}motion.mcap",
-        "hframe-8-rig",
+        truth,
         StepProtocol((-float(volts), float(v2)), step_s=0.5, duration_s=1.0, pre_roll_s=0.05),
         seed,
         f"section 4.4 open-loop {motion}-motion, motor 1 / motor 2 = -{volts} / {v2} V",
+    )
+
+
+def _pulse(volts: int, seed: int, truth: str) -> DatasetSpec:
+    return DatasetSpec(
+        f"{volts}V_oneaxis.mcap",
+        truth,
+        PulseProtocol(float(volts), width_s=0.25, duration_s=0.6, pre_roll_s=0.05),
+        seed,
+        f"section 2.3 one-axis {volts} V pulse of 0.25 s",
     )
 
 
@@ -134,20 +187,49 @@ DATASETS: tuple[DatasetSpec, ...] = (
     _hframe(4, "x", 4404),
     _hframe(6, "y", 4405),
     _hframe(6, "x", 4406),
-    DatasetSpec(
-        "5V_oneaxis.mcap",
-        "one-axis-rig",
-        PulseProtocol(5.0, width_s=0.25, duration_s=0.6, pre_roll_s=0.05),
-        2301,
-        "section 2.3 one-axis 5 V pulse of 0.25 s",
+    _pulse(5, 2301, "one-axis-rig"),
+    _pulse(10, 2302, "one-axis-rig"),
+)
+
+REALISTIC_DATASETS: tuple[DatasetSpec, ...] = (
+    *(
+        _hframe(volts, motion, 4411 + i, "hframe-realistic")
+        for i, (volts, motion) in enumerate((v, m) for v in (2, 4, 6) for m in ("y", "x"))
     ),
     DatasetSpec(
-        "10V_oneaxis.mcap",
-        "one-axis-rig",
-        PulseProtocol(10.0, width_s=0.25, duration_s=0.6, pre_roll_s=0.05),
-        2302,
-        "section 2.3 one-axis 10 V pulse of 0.25 s",
+        "3V_multisine.mcap",
+        "hframe-realistic",
+        MultisineProtocol(3.0, 0.5, 10.0, period_s=2.0, duration_s=2.05, pre_roll_s=0.05, seed=0),
+        4417,
+        "random-phase multisine, 3 V rms per motor, 0.5-10 Hz, one 2 s period (motor 1 even, "
+        "motor 2 odd harmonics of 0.5 Hz)",
     ),
+    _pulse(5, 2311, "one-axis-realistic"),
+    _pulse(10, 2312, "one-axis-realistic"),
+)
+
+
+@dataclass(frozen=True)
+class Collection:
+    """A datasets folder: its truth (or plant) files, recordings and manifest header."""
+
+    title: str
+    regenerate: str
+    truths: dict[str, TruthSpec | PlantSpec]
+    datasets: tuple[DatasetSpec, ...]
+
+
+STANDARD = Collection(
+    "hframe-id shipped datasets (synthetic, sim rig)",
+    "make datasets  (hframe-id datasets make --out datasets)",
+    TRUTHS,
+    DATASETS,
+)
+REALISTIC = Collection(
+    "hframe-id realistic datasets (synthetic, realistic sim rig, docs/realistic-rig.md)",
+    "hframe-id datasets make --realistic --out datasets/realistic",
+    PLANTS,
+    REALISTIC_DATASETS,
 )
 
 
@@ -159,29 +241,29 @@ def make_datasets(
     out: str | Path,
     only: Sequence[str] = (),
     progress: Callable[[DatasetSpec, RunSummary], None] | None = None,
+    collection: Collection = STANDARD,
 ) -> Path:
     """Write the truth files, the recordings and the manifest into ``out``; return the manifest.
 
     ``only`` limits the recordings made (by file name); the manifest then keeps the other
-    entries it already lists.
+    entries it already lists. ``collection``: ``STANDARD`` (datasets/) or ``REALISTIC``.
     """
     out = Path(out)
-    known = {d.file for d in DATASETS}
+    known = {d.file for d in collection.datasets}
     unknown = [name for name in only if name not in known]
     if unknown:
         raise OptionError(f"unknown dataset(s) {', '.join(unknown)}; known: {', '.join(known)}")
-    truth_sets = {}
-    for spec in TRUTHS.values():
-        path = save_parameter_file(spec.build(), out / spec.file, overwrite=True)
-        truth_sets[spec.name] = load_parameter_file(path)
+    plants, extra = {}, {}
+    for name, spec in collection.truths.items():
+        plants[name], extra[name] = spec.write(out)
     manifest_path = out / MANIFEST
     entries: dict[str, dict[str, Any]] = {}
     if only and manifest_path.exists():
         entries = {e["file"]: e for e in load_manifest(manifest_path)["datasets"]}
-    for spec in DATASETS:
+    for spec in collection.datasets:
         if only and spec.file not in only:
             continue
-        truth = truth_sets[spec.truth]
+        truth = plants[spec.truth]
         rig = SimRig(truth, seed=spec.seed, paced=False)
         summary = run_experiment(
             rig,
@@ -200,12 +282,14 @@ def make_datasets(
         )
         if summary.aborted or summary.lost_samples:
             raise OptionError(f"{spec.file}: the sim run did not complete ({summary.abort_reason})")
+        truth_file = collection.truths[spec.truth].file
         entries[spec.file] = {
             "file": spec.file,
             "sha256": sha256(out / spec.file),
             "bytes": (out / spec.file).stat().st_size,
-            "truth": TRUTHS[spec.truth].file,
-            "truth_sha256": sha256(out / TRUTHS[spec.truth].file),
+            "truth": truth_file,
+            "truth_sha256": sha256(out / truth_file),
+            **extra[spec.truth],
             "seed": spec.seed,
             "variant": truth.variant,
             "samples": summary.samples,
@@ -215,10 +299,10 @@ def make_datasets(
         if progress is not None:
             progress(spec, summary)
     manifest = {
-        "title": "hframe-id shipped datasets (synthetic, sim rig)",
-        "regenerate": "make datasets  (hframe-id datasets make --out datasets)",
+        "title": collection.title,
+        "regenerate": collection.regenerate,
         "start_time": NOMINAL_START.isoformat(),
-        "datasets": [entries[d.file] for d in DATASETS if d.file in entries],
+        "datasets": [entries[d.file] for d in collection.datasets if d.file in entries],
     }
     manifest_path.write_text(yaml.safe_dump(manifest, sort_keys=False, width=100))
     return manifest_path
@@ -248,7 +332,10 @@ def verify_datasets(folder: str | Path) -> list[str]:
         for name, digest in (
             (entry["file"], entry["sha256"]),
             (entry["truth"], entry.get("truth_sha256")),
+            (entry.get("reference"), entry.get("reference_sha256")),
         ):
+            if name is None:
+                continue
             path = folder / name
             if not path.exists():
                 problems.append(f"{path}: missing")
