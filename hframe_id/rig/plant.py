@@ -109,11 +109,14 @@ class Plant:
     def __post_init__(self) -> None:
         where = self.where()
         c = self.constants
-        fields = [("friction", key, name) for key, name in _FRICTION.items()]
-        for section, key, name in [*fields, ("amplifier", *next(iter(_AMPLIFIER.items())))]:
+        positive = [
+            ("friction", k, n) for k, n in _FRICTION.items() if k != "static_to_coulomb_ratio [-]"
+        ]
+        for section, key, name in [
+            *positive,
+            ("amplifier", "current_limit [A]", "current_limit_a"),
+        ]:
             value = getattr(c, name)
-            if key == "static_to_coulomb_ratio [-]":
-                continue
             if not (_is_number(value) and value > 0 and not math.isnan(value)):
                 raise ParameterFileError(f"{where}: {section}.{key} must be > 0, got {value!r}")
             if math.isinf(value) and section != "amplifier":
