@@ -29,6 +29,7 @@ DEFAULT_FIXED = ("r", "K_t", "K_e", "R", "g_1", "l_l0", "l_r0", "l_b0")
 VARIANT_FIXED = {"one-axis": ("J_2", "B_2", "tau_c2")}
 
 UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
+NOISE_METHODS = ("auto", "sensor", "estimate")
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,11 @@ class FitOptions:
     channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
         by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
         std for positions (both from the recording's rig metadata).
+    noise : how each channel is weighted. ``"sensor"``: by ``channel_std`` or the rig's
+        noise model; ``"estimate"``: by noise levels estimated from the residuals (maximum
+        likelihood with unknown channel variances, iterated, floored at the sensor's std);
+        ``"auto"`` (default): estimated if the sensor-weighted fit does not reach the noise
+        level (model mismatch, as on every real rig), else the sensor's.
     shooting_interval : samples per shooting window (a node every this many samples).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
         the model's (1e-3 m/s, 1e-2 rad/s).
@@ -115,6 +121,7 @@ class FitOptions:
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     bound_factor: float = 10.0
     channel_std: Mapping[str, float] = field(default_factory=dict)
+    noise: str = "auto"
     shooting_interval: int = 10
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
@@ -208,6 +215,10 @@ class FitOptions:
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
         _positive("max_substeps", self.max_substeps, integer=True)
+        if self.noise not in NOISE_METHODS:
+            raise OptionError(
+                f"noise must be one of {', '.join(NOISE_METHODS)}, got {self.noise!r}"
+            )
         if self.uncertainty not in UNCERTAINTY_METHODS:
             raise OptionError(
                 f"uncertainty must be one of {', '.join(UNCERTAINTY_METHODS)}, "
@@ -229,6 +240,7 @@ class FitOptions:
             "bounds": {k: [float(a), float(b)] for k, (a, b) in self.bounds.items()},
             "bound_factor": float(self.bound_factor),
             "channel_std": {k: float(v) for k, v in self.channel_std.items()},
+            "noise": self.noise,
             "shooting_interval_samples": int(self.shooting_interval),
             "smoothing": list(self.smoothing) if self.smoothing else "model default",
             "smoothing_schedule": list(self.smoothing_schedule),
