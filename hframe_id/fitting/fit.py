@@ -590,6 +590,7 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
         nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
     measured = nodes
     nodes = nodes.copy()
+    mismatch = False
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
     # the stiff stretches at rest makes each evaluation several times cheaper.
     moving = ms.moving_windows(velocity, smoothing) if options.first_stage else np.arange(0)
@@ -632,6 +633,9 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
                 break
         counter["evaluations"] += gn_sub.evaluations
         theta = sub_state.theta
+        mismatch = (
+            options.noise != "sensor" and sub.residual_rms(sub_state.evaluation.cost) > MISMATCH_RMS
+        )
         known = np.zeros(ms.n_windows, dtype=bool)
         known[moving] = True
         # The first moving window of each stretch starts at rest (it is the margin before
@@ -650,6 +654,13 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
         nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
     gn = GaussNewton(ms, progress)
     gn.freeze_sloppy = True
+    if mismatch:
+        # The model does not follow the data at the sensors' noise level: the weights are
+        # wrong by orders of magnitude, so the all-window stages are left to the noise
+        # rounds (``_estimate_noise``), which start from here.
+        state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
+        state.evaluation = ms.evaluate(nodes, theta, smoothing, velocity_hint=velocity)
+        return state, gn
     # Exact continuity from the nodes so far; if that fails (nodes at rest simulated with
     # parameters that are still off, e.g. an unmeasured pulley's stretch at rest), the same
     # fallback as above from the measured nodes: continuity first as a penalty, then exact.
