@@ -27,6 +27,9 @@ DEFAULT_FIXED = ("r", "K_t", "K_e", "R", "g_1", "l_l0", "l_r0", "l_b0")
 #: (collinearity indices 1e3-4e4, measured on the shipped 5 V + 10 V pulses): with them free
 #: the fit wanders along the valley and stalls (docs/fitting.md, "one-axis").
 VARIANT_FIXED = {"one-axis": ("J_2", "B_2", "tau_c2")}
+#: Prior relative std of a table value held in a fit (``FitOptions.consider``): the spread
+#: between the thesis's own tables and between rigs is 10-20 % (Tables 2.1/2.3, 4.1/4.2).
+HELD_PRIOR_RELATIVE_STD = 0.2
 
 UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
@@ -69,6 +72,10 @@ class FitOptions:
     channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
         by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
         std for positions (both from the recording's rig metadata).
+    consider : ``{name: relative std}`` of held parameters whose uncertainty the intervals
+        include (consider covariance, ``hframe_id.fitting.consider``). ``None`` (default):
+        the variant's ``VARIANT_FIXED`` table values and any parameter held for
+        identifiability, each at ``HELD_PRIOR_RELATIVE_STD``; ``{}``: held values exact.
     noise : how each channel is weighted. ``"sensor"``: by ``channel_std`` or the rig's
         noise model; ``"estimate"``: by noise levels estimated from the residuals (maximum
         likelihood with unknown channel variances, iterated, floored at the sensor's std);
@@ -122,6 +129,7 @@ class FitOptions:
     bound_factor: float = 10.0
     channel_std: Mapping[str, float] = field(default_factory=dict)
     noise: str = "auto"
+    consider: Mapping[str, float] | None = None
     shooting_interval: int = 10
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
@@ -215,6 +223,13 @@ class FitOptions:
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
         _positive("max_substeps", self.max_substeps, integer=True)
+        if self.consider is not None:
+            if not isinstance(self.consider, Mapping):
+                raise OptionError(
+                    f"consider must map parameter names to relative std, got {self.consider!r}"
+                )
+            for name, value in self.consider.items():
+                _positive(f"consider[{name!r}]", value)
         if self.noise not in NOISE_METHODS:
             raise OptionError(
                 f"noise must be one of {', '.join(NOISE_METHODS)}, got {self.noise!r}"
@@ -241,6 +256,7 @@ class FitOptions:
             "bound_factor": float(self.bound_factor),
             "channel_std": {k: float(v) for k, v in self.channel_std.items()},
             "noise": self.noise,
+            "consider": "default" if self.consider is None else dict(self.consider),
             "shooting_interval_samples": int(self.shooting_interval),
             "smoothing": list(self.smoothing) if self.smoothing else "model default",
             "smoothing_schedule": list(self.smoothing_schedule),

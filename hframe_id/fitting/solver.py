@@ -432,8 +432,9 @@ class GaussNewton:
 
         Converged: the last step was a full Gauss-Newton step (trust region inactive) that
         changed no free parameter by more than ``step_tol`` (relative), and the continuity
-        defects are below ``defect_tol`` (noise units). Intermediate stages may stop once
-        an iteration lowers the cost by less than ``cost_rtol`` (relative). With ``give_up``,
+        defects are below ``defect_tol`` (noise units). A stage may also stop once an
+        iteration lowers the cost by less than ``cost_rtol`` (relative; exact stages only
+        with the defects below ``defect_tol``). With ``give_up``,
         a stage far from the noise level that stops making progress ends unconverged early
         (for fast paths that have a fallback).
         """
@@ -665,9 +666,15 @@ class GaussNewton:
                     f"{give_up} iterations, residual rms {ms.residual_rms(ev.cost):.3g} noise std"
                 )
                 break
-            if cost_rtol > 0 and 0 <= previous_cost - ev.cost <= cost_rtol * ev.cost:
+            if (
+                cost_rtol > 0
+                and 0 <= previous_cost - ev.cost <= cost_rtol * ev.cost
+                and (penalty is not None or max_defect <= defect_tol)
+            ):
                 converged = True
                 message = f"cost decrease below {cost_rtol:g} (relative)"
+                if penalty is None:
+                    message += f", largest continuity defect {max_defect:.2g} noise std"
                 break
             if step <= step_tol and full_step and max_defect <= defect_tol:
                 converged = True

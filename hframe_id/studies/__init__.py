@@ -1,0 +1,1 @@
+"""Studies of the estimators on simulated plants (measurements behind docs/fitting.md)."""
