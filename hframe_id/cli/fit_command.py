@@ -3,18 +3,28 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
+import time
 import warnings
 from pathlib import Path
 
 from hframe_id.errors import FitError, OptionError
-from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.options import UNCERTAINTY_METHODS
+from hframe_id.fitting import FitOptions, FitResult, fit_recordings
+from hframe_id.fitting.options import NOISE_METHODS, UNCERTAINTY_METHODS
 from hframe_id.fitting.output import write_parameter_file
-from hframe_id.fitting.report import MODELS_DIR, THESIS_REFERENCE, write_report
-from hframe_id.parameters import load_parameter_file
+from hframe_id.fitting.report import (
+    MODELS_DIR,
+    THESIS_REFERENCE,
+    mismatch_rows,
+    mismatch_statement,
+    write_report,
+)
+from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import read_recording
+from hframe_id.recordings.recording import Recording
+from hframe_id.validation.cross_validation import LeaveOneOutTable, leave_one_out
 
 #: Where bare recording names are looked up: the working directory's datasets/, then the
 #: project's shipped datasets/.
@@ -59,8 +69,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Fit a model's parameters to one or more MCAP recordings of the same rig, jointly, "
             "by multiple shooting in CasADi (Gauss-Newton on the lifted problem). Writes a "
             "versioned parameter file <fit id>.yaml (only if the fit succeeds) and a report "
-            "<fit id>-report.md with plots to --out-dir. Exit status: 0 success, 1 the solver "
-            "failed (report only), 2 bad input."
+            "<fit id>-report.md with plots to --out-dir; with several recordings the report "
+            "has a leave-one-recording-out cross-validation table. A fit that converges but "
+            "does not follow the data at the sensors' noise level (model mismatch) succeeds "
+            "and says so. Exit status: 0 success, 1 the solver failed (report only), 2 bad "
+            "input."
         ),
         formatter_class=_HelpFormatter,
     )
@@ -119,6 +132,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="noise std [rad or m] that weights an output's residuals (repeatable; outputs "
         "phi1, phi2, x, y for the H-frame, phi1, x for one-axis); default: "
         "encoder step/sqrt(12) and the rig's laser noise",
+    )
+    parser.add_argument(
+        "--noise",
+        choices=NOISE_METHODS,
+        default=FitOptions.noise,
+        help="channel weights: 'sensor' the sensors' noise (--channel-std or the rig's "
+        "noise model); 'estimate' noise levels estimated from the residuals; 'auto' "
+        "estimated when the model does not follow the data at the sensors' noise level",
     )
     parser.add_argument(
         "--shooting-interval",
@@ -194,6 +215,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="worker threads (default: the CPU count, at most 8)",
     )
+    parser.add_argument(
+        "--no-cross-validation",
+        action="store_true",
+        help="skip the leave-one-recording-out cross-validation of a fit of several "
+        "recordings (it refits once per recording)",
+    )
     parser.add_argument("--out-dir", default="fits", help="where the fit and report go")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.set_defaults(handler=run)
@@ -247,6 +274,7 @@ def _options(args: argparse.Namespace) -> FitOptions:
         bounds=bounds,
         bound_factor=args.bound_factor,
         channel_std=channel_std,
+        noise=args.noise,
         shooting_interval=args.shooting_interval,
         smoothing=smoothing,
         smoothing_schedule=tuple(
@@ -264,8 +292,90 @@ def _options(args: argparse.Namespace) -> FitOptions:
     )
 
 
+def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path]:
+    """The start of the fit and its file, which must be of the fitted ``variant``."""
+    if args.initial:
+        path = Path(args.initial)
+    elif variant in THESIS_REFERENCE:
+        path = MODELS_DIR / THESIS_REFERENCE[variant][0]
+    else:
+        raise FitError(f"no default initial parameters for model {variant!r}; use --initial")
+    return load_parameter_file(path, variant=variant), path
+
+
+def _cross_validate(
+    recordings: list[Recording], initial: ParameterSet, options: FitOptions, quiet: bool
+) -> LeaveOneOutTable:
+    """Leave-one-recording-out refits with the fit's options, a line per fold on stderr."""
+
+    def announce(fold: int, folds: int, held_out: str) -> None:
+        if not quiet:
+            print(
+                f"cross-validation {fold}/{folds}: fitting without {held_out}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    start = time.perf_counter()
+    table = leave_one_out(
+        recordings, initial, dataclasses.replace(options, verbose=0, progress=None), announce
+    )
+    if not quiet:
+        print(
+            f"cross-validation: {len(recordings)} refits in {time.perf_counter() - start:.1f} s",
+            file=sys.stderr,
+        )
+    return table
+
+
+def _print_mismatch(result: FitResult) -> None:
+    statement = mismatch_statement(result)
+    if statement is None:
+        return
+    rows = mismatch_rows(result)
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    print(f"model mismatch: {statement}")
+    for row in rows:
+        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)))
+
+
+def _write_outputs(
+    result: FitResult,
+    recordings: list[Recording],
+    paths: list[Path],
+    initial_path: Path,
+    out_dir: Path,
+    cross_validation: LeaveOneOutTable | None,
+) -> tuple[Path | None, Path]:
+    """The parameter file (a successful fit only) and the report with its plots: all of them
+    or, on any exception, none (nor ``out_dir`` if this created it)."""
+    created = not out_dir.exists()
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FitError(f"--out-dir {out_dir}: cannot create it ({err.strerror})") from err
+    parameter_file = None
+    try:
+        fit_id, parameter_file = write_parameter_file(
+            result, recordings, paths, initial_path, out_dir
+        )
+        report = write_report(result, recordings, fit_id, parameter_file, out_dir, cross_validation)
+    except BaseException:
+        if parameter_file is not None:
+            parameter_file.unlink(missing_ok=True)
+        if created and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+        raise
+    return parameter_file, report
+
+
 def run(args: argparse.Namespace) -> int:
     options = _options(args)
+    out_dir = Path(args.out_dir)
+    check_out_dir(out_dir)
+    if args.model:
+        # A start of another variant fails before the recordings are read.
+        initial, initial_path = _initial(args, args.model)
     paths = [resolve_dataset(name) for name in args.files]
     recordings = []
     with warnings.catch_warnings(record=True) as caught:
@@ -275,15 +385,8 @@ def run(args: argparse.Namespace) -> int:
     for warning in caught:
         print(f"hframe-id: warning: {warning.message}", file=sys.stderr)
     variant = args.model or recordings[0].variant
-    if args.initial:
-        initial_path = Path(args.initial)
-    else:
-        if variant not in THESIS_REFERENCE:
-            raise FitError(f"no default initial parameters for model {variant!r}; use --initial")
-        initial_path = MODELS_DIR / THESIS_REFERENCE[variant][0]
-    initial = load_parameter_file(initial_path, variant=variant)
-    out_dir = Path(args.out_dir)
-    check_out_dir(out_dir)
+    if not args.model:
+        initial, initial_path = _initial(args, variant)
     if not args.quiet:
         total = sum(rec.n_samples for rec in recordings)
         print(
@@ -292,13 +395,14 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     result = fit_recordings(recordings, initial, options)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise FitError(f"--out-dir {out_dir}: cannot create it ({err.strerror})") from err
-    fit_id, parameter_file = write_parameter_file(result, recordings, paths, initial_path, out_dir)
-    report = write_report(result, recordings, fit_id, parameter_file, out_dir)
+    cross_validation = None
+    if result.success and len(recordings) > 1 and not args.no_cross_validation:
+        cross_validation = _cross_validate(recordings, initial, options, args.quiet)
+    parameter_file, report = _write_outputs(
+        result, recordings, paths, initial_path, out_dir, cross_validation
+    )
     print(result.summary())
+    _print_mismatch(result)
     if parameter_file:
         print(f"parameter file: {parameter_file}")
     print(f"report: {report}")

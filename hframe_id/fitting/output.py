@@ -5,7 +5,9 @@ controller and the exporters read it like the thesis's; its header adds
 
 - ``provenance``: fit id, time, software version and git commit, every dataset with its
   sha256, model variant and options, free parameters with their initial values and the file
-  they came from, solver status, iterations, final cost, wall time;
+  they came from, solver status, iterations, final cost, wall time, and the channels' noise
+  levels: how the fit weighed each channel and its residual rms, with the model-mismatch
+  statement when the model does not follow the data at the sensors' noise level;
 - ``uncertainty``: per free parameter the estimate, standard error, 95 % interval, whether the
   data identify it (and which experiments would), plus the correlation matrix.
 
@@ -23,6 +25,7 @@ from typing import Any
 from hframe_id import __version__
 from hframe_id.errors import FitError
 from hframe_id.fitting.fit import FitResult
+from hframe_id.fitting.report import mismatch_statement, output_units
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
 
@@ -139,6 +142,31 @@ def provenance(
             "wall_time_s": round(float(result.wall_time_s), 3),
         },
         "not_identified_held_at_initial": list(result.not_identified),
+        "noise": noise_levels(result),
+    }
+
+
+def noise_levels(result: FitResult) -> dict[str, Any]:
+    """How the fit weighed each channel (the sensor's std, or a level estimated from the
+    residuals under model mismatch) and its residual rms, SI with the unit in every key."""
+    noise = result.diagnostics["noise"]
+    units = output_units(result.variant)
+    statement = mismatch_statement(result)
+    channels = {}
+    for name, channel in noise["channels"].items():
+        unit = units[name]
+        channels[name] = {
+            f"sensor_std [{unit}]": _number(channel["sensor_std"]),
+            f"weight_std [{unit}]": _number(channel["weight_std"]),
+            f"residual_rms [{unit}]": _number(channel["residual_rms"]),
+            "residual_rms [sensor std]": _number(channel["residual_rms_sensor_std"]),
+        }
+    return {
+        "weights": "estimated from the residuals" if statement else "sensor noise",
+        "rounds": int(noise["rounds"]),
+        "model_mismatch": statement is not None,
+        **({"statement": statement} if statement else {}),
+        "channels": channels,
     }
 
 

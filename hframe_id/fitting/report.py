@@ -1,28 +1,35 @@
 """The fit report: a markdown file with plots comparing the fit with the thesis (and truth).
 
-Sections: status; parameter table against the thesis's Table 4.2 (hframe-8) or Table 2.3
-(one-axis), with a truth column when the recordings carry their plant's parameters (sim rig);
-parameters the data do not identify and which experiments would; measured vs simulated signals
-(fitted and thesis parameters) and residuals for every experiment; the correlation matrix.
+Sections: status; the model-mismatch statement when the fit weighed the channels by noise
+levels estimated from its residuals; parameter table against the thesis's Table 4.2
+(hframe-8) or Table 2.3 (one-axis), with a truth column when the recordings carry their
+plant's parameters (sim rig), through the section-4.1 reduction for an hframe-20 plant
+fitted with hframe-8; parameters the data do not identify and which experiments would;
+leave-one-recording-out cross-validation; measured vs simulated signals (fitted and thesis
+parameters) and residuals for every experiment; the correlation matrix.
+
+Figures are ``matplotlib.figure.Figure`` objects drawn by the Agg canvas (matplotlib imported
+inside the plotting functions): importing this module sets no backend and no global state.
+Plots are drawn into a hidden temporary folder that is renamed into place at the end, so a
+failure leaves neither plots nor report behind.
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from hframe_id.atomic import replace_atomically  # noqa: E402
-from hframe_id.fitting.fit import FitResult  # noqa: E402
-from hframe_id.fitting.problem import applied_inputs  # noqa: E402
-from hframe_id.models import build_model  # noqa: E402
-from hframe_id.parameters import ParameterSet, load_parameter_file  # noqa: E402
-from hframe_id.recordings.recording import Recording  # noqa: E402
-from hframe_id.simulation.open_loop import simulate  # noqa: E402
+from hframe_id.atomic import replace_atomically, staged_directory
+from hframe_id.fitting.fit import FitResult
+from hframe_id.fitting.problem import applied_inputs
+from hframe_id.models import build_model
+from hframe_id.parameters import ParameterSet, load_parameter_file
+from hframe_id.parameters.reduce import reduce_to_hframe8
+from hframe_id.recordings.recording import Recording
+from hframe_id.simulation.open_loop import simulate
+from hframe_id.validation.cross_validation import LeaveOneOutTable
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 #: The thesis's parameter set each variant's fit is compared with.
@@ -31,7 +38,7 @@ THESIS_REFERENCE = {
     "one-axis": ("one-axis-table2.3.yaml", "Table 2.1 + 2.3"),
     "hframe-20": ("hframe-20-table3.1.yaml", "Table 3.1"),
 }
-#: Plot scale per output unit: show angles in rad, positions in mm.
+#: Display scale per output unit: angles in rad, positions in mm.
 _SCALE = {"rad": (1.0, "rad"), "m": (1e3, "mm")}
 _RESIDUAL_SCALE = {"rad": (1e6, "urad"), "m": (1e6, "um")}
 
@@ -47,28 +54,125 @@ def common_truth(recordings: list[Recording]) -> ParameterSet | None:
     truths = [rec.truth for rec in recordings]
     if any(t is None for t in truths):
         return None
-    first = truths[0].values
-    return truths[0] if all(t.values == first for t in truths) else None
+    first = truths[0]
+    same = all(t.variant == first.variant and t.values == first.values for t in truths)
+    return first if same else None
+
+
+def comparable_truth(
+    recordings: list[Recording], variant: str
+) -> tuple[ParameterSet | None, str, str]:
+    """The recordings' plant parameters as a set of the fitted ``variant``.
+
+    Returns
+    -------
+    truth : the plant's parameters (an hframe-20 plant fitted with hframe-8: its section-4.1
+        reduction), or None when the recordings carry no common plant or it has no
+        counterpart in ``variant``.
+    label : the truth column's heading.
+    note : a sentence for the report on what the truth column is, or why there is none.
+    """
+    truth = common_truth(recordings)
+    if truth is None:
+        return None, "", ""
+    if truth.variant == variant:
+        return truth, "truth", "and the plant's true parameters, which the recordings carry."
+    if truth.variant == "hframe-20" and variant == "hframe-8":
+        return (
+            reduce_to_hframe8(truth),
+            "truth (section-4.1 reduction of the plant)",
+            "and the section-4.1 reduction (eq. 4.2-4.8) of the hframe-20 plant that made the "
+            "recordings: the hframe-8 parameters closest to that plant, not an exact truth.",
+        )
+    return (
+        None,
+        "",
+        f"No truth column: the recordings' plant is an {truth.variant} parameter set, which "
+        f"has no reduction to the fitted {variant} model.",
+    )
 
 
 def _fmt(value: float) -> str:
     return f"{value:.5g}"
 
 
+def output_units(variant: str) -> dict[str, str]:
+    """SI unit of each output of ``variant``'s model (``"rad"`` or ``"m"``)."""
+    return {s.name: s.unit for s in build_model(variant).outputs}
+
+
+def mismatch_statement(result: FitResult) -> str | None:
+    """A plain sentence saying that the model does not follow the data at the sensors' noise
+    level, or None when the fit weighed its channels by the sensors' noise."""
+    noise = result.diagnostics.get("noise")
+    if noise is None or noise["method"] != "estimated":
+        return None
+    ratios = [c["residual_rms_sensor_std"] for c in noise["channels"].values()]
+    return (
+        "The model does not follow the data at the sensors' noise level "
+        f"(residual rms {min(ratios):.3g} to {max(ratios):.3g} x the sensor std, per channel "
+        "below). The channels were weighted by noise levels estimated from the residuals "
+        f"({noise['rounds']} round(s)) instead of the sensor specifications; the residuals "
+        "are model error more than noise."
+    )
+
+
+def mismatch_rows(result: FitResult) -> list[tuple[str, ...]]:
+    """Header and one row per channel: sensor std, estimated noise std, residual rms, all in
+    display units (rad, mm), and the residual rms in sensor std."""
+    units = output_units(result.variant)
+    rows = [
+        (
+            "channel",
+            "sensor std",
+            "estimated noise std",
+            "residual rms",
+            "residual rms [sensor std]",
+        )
+    ]
+    for name, channel in result.diagnostics["noise"]["channels"].items():
+        scale, unit = _SCALE[units[name]]
+        rows.append(
+            (
+                name,
+                *(
+                    f"{scale * channel[key]:.3g} {unit}"
+                    for key in ("sensor_std", "weight_std", "residual_rms")
+                ),
+                f"{channel['residual_rms_sensor_std']:.3g}",
+            )
+        )
+    return rows
+
+
+def markdown_table(rows: list[tuple[str, ...]]) -> list[str]:
+    """Markdown lines of a table whose first row is the header."""
+    head, *body = rows
+    return [
+        "| " + " | ".join(head) + " |",
+        "|" + " --- |" * len(head),
+        *("| " + " | ".join(row) + " |" for row in body),
+    ]
+
+
 def parameter_table(
-    result: FitResult, thesis: ParameterSet | None, label: str, truth: ParameterSet | None
+    result: FitResult,
+    thesis: ParameterSet | None,
+    label: str,
+    truth: ParameterSet | None,
+    truth_label: str = "truth",
 ) -> list[str]:
-    header = [
+    header = (
         "parameter",
         f"thesis ({label})",
         "fitted",
         "95 % interval",
         "vs thesis",
         "identified",
-    ]
+    )
     if truth:
-        header += ["truth", "error vs truth"]
-    rows = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+        header += (truth_label, "error vs truth")
+    rows = [header]
     for est in result.estimates.values():
         if not est.free:
             continue
@@ -78,23 +182,25 @@ def parameter_table(
             status = "not assessed (fit failed)"
         elif est.identified:
             status = "yes"
-        else:
+        elif est.name in result.not_identified:
             status = "**no** (held at initial)"
+        else:
+            status = "poorly determined (kept at estimate)"
         if est.at_bound:
             status += ", at bound"
-        cells = [
+        cells = (
             est.key,
             _fmt(ref) if ref is not None else "n/a",
             _fmt(est.estimate),
             f"[{_fmt(est.ci95[0])}, {_fmt(est.ci95[1])}]",
             diff,
             status,
-        ]
+        )
         if truth:
             t = truth.values[est.name]
-            cells += [_fmt(t), f"{100 * (est.estimate / t - 1):+.3f} %"]
-        rows.append("| " + " | ".join(cells) + " |")
-    return rows
+            cells += (_fmt(t), f"{100 * (est.estimate / t - 1):+.3f} %")
+        rows.append(cells)
+    return markdown_table(rows)
 
 
 def simulated_outputs(params: ParameterSet, rec: Recording, x0: np.ndarray) -> np.ndarray:
@@ -110,20 +216,34 @@ def simulated_outputs(params: ParameterSet, rec: Recording, x0: np.ndarray) -> n
     return np.array(model.output.map(states.shape[0])(states.T)).T
 
 
+def _figure(size: tuple[float, float]):
+    """A figure on the Agg canvas (no pyplot, no backend switch)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=size, layout="constrained")
+    FigureCanvasAgg(figure)
+    return figure
+
+
 def plot_experiment(
-    rec: Recording, fitted: np.ndarray, thesis: np.ndarray | None, label: str, path: Path
+    rec: Recording,
+    fitted: np.ndarray,
+    thesis: np.ndarray | None,
+    label: str,
+    units: dict[str, str],
+    path: Path,
 ) -> None:
-    model = build_model(rec.variant)
-    units = [s.unit for s in model.outputs]
+    """Measured, fitted and thesis outputs of one recording, and the fit's residuals."""
     n = len(rec.output_names)
-    fig, axes = plt.subplots(2, n, figsize=(4.2 * n, 6), sharex=True, squeeze=False)
+    fig = _figure((4.2 * n, 6))
+    axes = fig.subplots(2, n, sharex=True, squeeze=False)
     t = rec.time_s
     for j, name in enumerate(rec.output_names):
-        scale, unit = _SCALE[units[j]]
-        rscale, runit = _RESIDUAL_SCALE[units[j]]
-        valid = rec.valid[:, j]
+        scale, unit = _SCALE[units[name]]
+        rscale, runit = _RESIDUAL_SCALE[units[name]]
+        measured = np.where(rec.valid[:, j], rec.outputs[:, j], np.nan)
         ax = axes[0, j]
-        measured = np.where(valid, rec.outputs[:, j], np.nan)
         ax.plot(t, scale * measured, "k.", ms=1.5, label="measured (valid)")
         ax.plot(t, scale * fitted[:, j], "C0", lw=1.2, label="fitted")
         if thesis is not None:
@@ -137,22 +257,151 @@ def plot_experiment(
         res.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(rec.name())
-    fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def plot_correlation(result: FitResult, path: Path) -> None:
     names = list(result.free_names)
-    fig, ax = plt.subplots(figsize=(0.45 * len(names) + 2.5, 0.45 * len(names) + 1.5))
+    fig = _figure((0.45 * len(names) + 2.5, 0.45 * len(names) + 1.5))
+    ax = fig.subplots()
     image = ax.imshow(result.correlation, cmap="RdBu_r", vmin=-1, vmax=1)
     ax.set_xticks(range(len(names)), names, rotation=90, fontsize=8)
     ax.set_yticks(range(len(names)), names, fontsize=8)
     fig.colorbar(image, ax=ax, shrink=0.8, label="correlation")
     ax.set_title("Correlation of the free parameters")
-    fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
+
+
+def _status_lines(result: FitResult, recordings: list[Recording], parameter_file) -> list[str]:
+    status = "success" if result.success else "**FAILED**"
+    return [
+        f"- status: {status} (solver: {result.message})",
+        f"- model: {result.variant}; {len(recordings)} experiment(s): "
+        + ", ".join(rec.name() for rec in recordings),
+        f"- cost {result.cost:.6g} (residual rms {result.residual_rms:.3g} x the noise "
+        f"levels weighed with), {result.iterations} iterations, "
+        f"{result.wall_time_s:.2f} s wall time",
+        f"- parameter file: `{parameter_file}`"
+        if parameter_file
+        else "- parameter file: none written (the fit failed; do not use these values)",
+        f"- uncertainty: {result.options.uncertainty} method, "
+        f"{round(100 * result.options.confidence)} % intervals",
+        "",
+    ]
+
+
+def _not_identified_lines(result: FitResult) -> list[str]:
+    """Free parameters the data do not determine: held at their initial values, or (under
+    model mismatch) kept at their estimates."""
+    weak = [est for est in result.estimates.values() if est.free and not est.identified]
+    if not result.success or not weak:
+        return []
+    lines = ["## Not identified or poorly determined", ""]
+    for est in weak:
+        if est.name in result.not_identified:
+            would = (
+                ", ".join(est.identified_by)
+                if est.identified_by
+                else "none of the standard step experiments alone"
+            )
+            fate = (
+                f"held at its initial value {_fmt(est.initial)}. Experiments that would "
+                f"identify it: {would}."
+            )
+        else:
+            fate = f"kept at its estimate {_fmt(est.estimate)} (poorly determined)."
+        lines.append(
+            f"- {est.key}: relative standard error {100 * est.relative_std:.3g} % "
+            f"(collinearity {est.collinearity:.3g}); {fate}"
+        )
+    return [*lines, ""]
+
+
+def _cross_validation_lines(table: LeaveOneOutTable) -> list[str]:
+    return [
+        "## Leave-one-recording-out cross-validation",
+        "",
+        "Each recording simulated with the parameters fitted to the others (same options and "
+        "start): simulation fit [%] = 100 (1 - |y - y_hat| / |y - mean(y)|) per channel, and "
+        "the free parameters' spread across the converged folds (SI).",
+        "",
+        table.markdown(),
+        "",
+    ]
+
+
+def _signal_lines(
+    result: FitResult,
+    recordings: list[Recording],
+    thesis: ParameterSet | None,
+    label: str,
+    plots: Path,
+    folder: str,
+) -> list[str]:
+    """Per experiment: plot (drawn into ``plots``, linked as ``folder``) and rms residuals."""
+    units = output_units(result.variant)
+    lines = ["## Measured and simulated signals", ""]
+    x0s = result.initial_states
+    for i, rec in enumerate(recordings):
+        x0 = x0s[i] if x0s is not None else None
+        fitted = simulated_outputs(result.parameters, rec, x0)
+        reference = simulated_outputs(thesis, rec, x0) if thesis else None
+        png = f"{Path(rec.name()).stem}.png"
+        plot_experiment(rec, fitted, reference, label, units, plots / png)
+        rms = []
+        for j, name in enumerate(rec.output_names):
+            valid = rec.valid[:, j]
+            scale, unit = _SCALE[units[name]]
+            value = np.sqrt(np.mean((rec.outputs[valid, j] - fitted[valid, j]) ** 2))
+            rms.append(f"{name} {scale * value:.3g} {unit}")
+        lines += [
+            f"### {rec.name()}",
+            "",
+            f"RMS residual: {', '.join(rms)}",
+            "",
+            f"![{rec.name()}]({folder}/{png})",
+            "",
+        ]
+    return lines
+
+
+def _report_lines(
+    result: FitResult,
+    recordings: list[Recording],
+    fit_id: str,
+    parameter_file: Path | None,
+    cross_validation: LeaveOneOutTable | None,
+    plots: Path,
+    folder: str,
+) -> list[str]:
+    thesis, label = thesis_reference(result.variant)
+    truth, truth_label, truth_note = comparable_truth(recordings, result.variant)
+    lines = [f"# Fit {fit_id}", "", *_status_lines(result, recordings, parameter_file)]
+    statement = mismatch_statement(result)
+    if statement:
+        lines += ["## Model mismatch", "", statement, "", *markdown_table(mismatch_rows(result))]
+        lines.append("")
+    intro = f"Fitted values against the thesis ({label})"
+    if truth:
+        intro += f" {truth_note}"
+    else:
+        intro += "." + (f" {truth_note}" if truth_note else "")
+    lines += [
+        "## Parameters",
+        "",
+        intro,
+        "",
+        *parameter_table(result, thesis, label, truth, truth_label),
+        "",
+        *_not_identified_lines(result),
+    ]
+    if cross_validation is not None:
+        lines += _cross_validation_lines(cross_validation)
+    lines += _signal_lines(result, recordings, thesis, label, plots, folder)
+    if len(result.free_names) > 1:
+        plot_correlation(result, plots / "correlation.png")
+        lines += ["## Correlation", "", f"![correlation]({folder}/correlation.png)", ""]
+    return lines
 
 
 def write_report(
@@ -161,80 +410,31 @@ def write_report(
     fit_id: str,
     parameter_file: Path | None,
     out_dir: Path,
+    cross_validation: LeaveOneOutTable | None = None,
 ) -> Path:
-    """Write ``<out_dir>/<fit id>-report.md`` and its plots in ``<fit id>-plots/``."""
+    """Write ``<out_dir>/<fit id>-report.md`` and its plots in ``<fit id>-plots/``.
+
+    Parameters
+    ----------
+    result : the fit.
+    recordings : the recordings fitted, in the fit's order.
+    fit_id : the fit's id (``output.write_parameter_file``); names the report and plots.
+    parameter_file : the fit's parameter file, or None when none was written.
+    out_dir : an existing folder.
+    cross_validation : the leave-one-recording-out table, if computed.
+
+    Returns
+    -------
+    The report's path. The plots are drawn into a hidden temporary folder renamed to
+    ``<fit id>-plots`` once all are drawn; on any exception neither plots nor report is left.
+    """
     plots = out_dir / f"{fit_id}-plots"
-    plots.mkdir(parents=True, exist_ok=True)
-    thesis, label = thesis_reference(result.variant)
-    truth = common_truth(recordings)
-    lines = [f"# Fit {fit_id}", ""]
-    status = "success" if result.success else "**FAILED**"
-    lines += [
-        f"- status: {status} (solver: {result.message})",
-        f"- model: {result.variant}; {len(recordings)} experiment(s): "
-        + ", ".join(rec.name() for rec in recordings),
-        f"- cost {result.cost:.6g} (residual rms {result.residual_rms:.3g} x the noise "
-        f"model), {result.iterations} iterations, "
-        f"{result.wall_time_s:.2f} s wall time",
-        f"- parameter file: `{parameter_file}`"
-        if parameter_file
-        else "- parameter file: none written (the fit failed; do not use these values)",
-        f"- uncertainty: {result.options.uncertainty} method, "
-        f"{round(100 * result.options.confidence)} % intervals",
-        "",
-        "## Parameters",
-        "",
-        f"Fitted values against the thesis ({label})"
-        + (
-            " and the plant's true parameters, which the recordings carry (sim rig)."
-            if truth
-            else "."
-        ),
-        "",
-        *parameter_table(result, thesis, label, truth),
-        "",
-    ]
-    held = [est for est in result.estimates.values() if est.free and not est.identified]
-    if held:
-        lines += ["## Not identified", ""]
-        for est in held:
-            would = (
-                ", ".join(est.identified_by)
-                if est.identified_by
-                else "none of the standard step experiments alone"
-            )
-            lines.append(
-                f"- {est.key}: relative standard error {100 * est.relative_std:.3g} % "
-                f"(collinearity {est.collinearity:.3g}); held at its initial value "
-                f"{_fmt(est.initial)}. Experiments that would identify it: {would}."
-            )
-        lines.append("")
-    lines += ["## Measured and simulated signals", ""]
-    x0s = result.initial_states
-    for i, rec in enumerate(recordings):
-        x0 = x0s[i] if x0s is not None else None
-        fitted = simulated_outputs(result.parameters, rec, x0)
-        reference = simulated_outputs(thesis, rec, x0) if thesis else None
-        png = plots / f"{Path(rec.name()).stem}.png"
-        plot_experiment(rec, fitted, reference, label, png)
-        rms = [
-            np.sqrt(np.nanmean((rec.outputs[rec.valid[:, j], j] - fitted[rec.valid[:, j], j]) ** 2))
-            for j in range(len(rec.output_names))
-        ]
-        rms_text = ", ".join(
-            f"{name} {value:.3g}" for name, value in zip(rec.output_names, rms, strict=True)
+    with staged_directory(plots) as staging:
+        lines = _report_lines(
+            result, recordings, fit_id, parameter_file, cross_validation, staging, plots.name
         )
-        lines += [
-            f"### {rec.name()}",
-            "",
-            f"RMS residual (SI): {rms_text}",
-            "",
-            f"![{rec.name()}]({plots.name}/{png.name})",
-            "",
-        ]
-    if len(result.free_names) > 1:
-        png = plots / "correlation.png"
-        plot_correlation(result, png)
-        lines += ["## Correlation", "", f"![correlation]({plots.name}/{png.name})", ""]
-    path = out_dir / f"{fit_id}-report.md"
-    return replace_atomically(path, "\n".join(lines))
+    try:
+        return replace_atomically(out_dir / f"{fit_id}-report.md", "\n".join(lines) + "\n")
+    except BaseException:
+        shutil.rmtree(plots, ignore_errors=True)
+        raise

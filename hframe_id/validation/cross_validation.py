@@ -9,7 +9,7 @@ the parameters across folds shows how much each depends on which experiments wer
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,7 +114,10 @@ def _spread(folds: Sequence[Fold], initial: ParameterSet) -> tuple[Spread, ...]:
 
 
 def leave_one_out(
-    recordings: Sequence[Recording], initial: ParameterSet, options: FitOptions | None = None
+    recordings: Sequence[Recording],
+    initial: ParameterSet,
+    options: FitOptions | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> LeaveOneOutTable:
     """For each recording, fit on all the others and report its simulation fit per channel.
 
@@ -123,6 +126,8 @@ def leave_one_out(
     recordings : two or more recordings of one rig.
     initial : start of every fold's fit (and the model).
     options : the fit's options (``hframe_id.fitting.FitOptions``), the same for every fold.
+    progress : called before each fold's fit with (fold number from 1, folds, held-out
+        recording's name).
 
     Returns
     -------
@@ -140,6 +145,8 @@ def leave_one_out(
     check_inputs([initial], recordings)
     folds = []
     for i, held in enumerate(recordings):
+        if progress is not None:
+            progress(i + 1, len(recordings), held.name())
         result = fit_recordings(recordings[:i] + recordings[i + 1 :], initial, options)
         data, simulated = simulate_channels(result.parameters, held)
         folds.append(
