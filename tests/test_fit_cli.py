@@ -1,5 +1,7 @@
 """`hframe-id fit` end to end: files on success, none on failure, errors before solving."""
 
+import contextlib
+import io
 from pathlib import Path
 
 import pytest
@@ -133,3 +135,75 @@ def test_fit_file_header_is_plain_yaml(fitted):
     doc = yaml.safe_load(yaml_path.read_text())
     assert list(doc)[:4] == ["format_version", "model", "title", "source"]
     assert all(" [" in key for key in doc["parameters"])
+
+
+def _record(folder: Path, params: Path, volts: tuple[float, float], name: str) -> Path:
+    """A 0.4 s step recorded on the sim rig from ``params`` (unpaced, ~1 s)."""
+    path = folder / name
+    v1, v2 = (str(v) for v in volts)
+    status = main(["record", "--rig", "sim", "--params", str(params), "--fast", "--v1", v1,
+                   "--v2", v2, "--step", "0.3", "--duration", "0.4", "--out", str(path),
+                   "--quiet"])  # fmt: skip
+    assert status == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def mismatched_fit(tmp_path_factory):
+    """An x-motion step of the 20th-order plant (Table 3.1) fitted with hframe-8: the model
+    cannot follow the encoders at their quantization noise (~10 s)."""
+    folder = tmp_path_factory.mktemp("h20")
+    data = _record(folder, ROOT / "models" / "hframe-20-table3.1.yaml", (-4, 4), "h20_x.mcap")
+    out = folder / "fits"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        status = main(["fit", str(data), "--model", "hframe-8", "--free", "k_l,k_r",
+                       "--out-dir", str(out), "--quiet"])  # fmt: skip
+    return status, out, printed.getvalue()
+
+
+def test_hframe20_plant_fitted_with_hframe8_succeeds_with_a_mismatch_statement(mismatched_fit):
+    status, out, printed = mismatched_fit
+    assert status == 0
+    assert "model mismatch: The model does not follow the data" in printed
+    assert "estimated noise std" in printed and " mm " in printed
+    (report,) = out.glob("*-report.md")
+    text = report.read_text()
+    # the plant's truth compared through its section-4.1 reduction, not a KeyError
+    assert "truth (section-4.1 reduction of the plant)" in text
+    assert "does not follow the data at the sensors' noise level" in text
+    (yaml_path,) = out.glob("*.yaml")
+    noise = load_parameter_file(yaml_path, variant="hframe-8").provenance["noise"]
+    assert noise["model_mismatch"] is True
+    assert noise["channels"]["phi1"]["residual_rms [sensor std]"] > 10
+
+
+def test_initial_of_another_variant_fails_before_reading_recordings(tmp_path, capsys):
+    h20 = str(ROOT / "models" / "hframe-20-table3.1.yaml")
+    status = main(["fit", "no_such.mcap", "--model", "hframe-8", "--initial", h20,
+                   "--out-dir", str(tmp_path / "out")])  # fmt: skip
+    assert status == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("hframe-id: error:")
+    assert "'hframe-20'" in err and "'hframe-8'" in err and "no such recording" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_several_recordings_get_a_leave_one_out_table(tmp_path, capsys):
+    table = ROOT / "models" / "hframe-8-table4.2.yaml"
+    files = [
+        str(_record(tmp_path, table, volts, name))
+        for name, volts in (("x.mcap", (-4, 4)), ("y.mcap", (-4, -4)))
+    ]
+    capsys.readouterr()
+    args = ["fit", *files, "--free", "k_l,k_r", "--noise", "sensor"]
+    assert main([*args, "--out-dir", str(tmp_path / "cv")]) == 0
+    err = capsys.readouterr().err
+    assert "cross-validation 1/2: fitting without x.mcap" in err
+    assert "cross-validation 2/2: fitting without y.mcap" in err
+    (report,) = (tmp_path / "cv").glob("*-report.md")
+    assert "## Leave-one-recording-out cross-validation" in report.read_text()
+    assert main([*args, "--out-dir", str(tmp_path / "no-cv"), "--no-cross-validation"]) == 0
+    assert "cross-validation" not in capsys.readouterr().err
+    (report,) = (tmp_path / "no-cv").glob("*-report.md")
+    assert "Leave-one-recording-out" not in report.read_text()
