@@ -329,6 +329,7 @@ def _cross_validate(
 
 
 def _print_mismatch(result: FitResult) -> None:
+    """The model-mismatch statement and its per-channel table, if the fit estimated noise."""
     statement = mismatch_statement(result)
     if statement is None:
         return
@@ -336,7 +337,8 @@ def _print_mismatch(result: FitResult) -> None:
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
     print(f"model mismatch: {statement}")
     for row in rows:
-        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)))
+        cells = (cell.ljust(width) for cell, width in zip(row, widths, strict=True))
+        print("  ".join(cells).rstrip())
 
 
 def _write_outputs(

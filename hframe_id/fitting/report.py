@@ -87,8 +87,8 @@ def comparable_truth(
     return (
         None,
         "",
-        f"No truth column: the recordings' plant is an {truth.variant} parameter set, which "
-        f"has no reduction to the fitted {variant} model.",
+        f"No truth column: the recordings' plant parameters are of the {truth.variant} "
+        f"model, which has no reduction to the fitted {variant} model.",
     )
 
 
