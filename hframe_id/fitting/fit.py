@@ -78,6 +78,7 @@ RESTART_MIN_GAIN = 2.0
 #: 1.0-1.3); rounds of re-weighting at most, and the relative change of every channel's std
 #: (in log) below which the noise levels count as a fixed point.
 MISMATCH_RMS = 3.0
+DEFERRED_STAGE = "all windows: deferred to the noise rounds"
 #: Warm-started noise rounds also stop once an iteration lowers the cost by less than this
 #: (relative): at their costs (~N / 2, N valid samples) that is below 1e-3 in chi^2 / 2
 #: units, far under the statistical resolution (1 unit). Under model mismatch the monotone
@@ -294,19 +295,20 @@ def fit_recordings(
     for prepass in attempts:
         outcome = _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass)
         state, gn, stats, held = outcome
-        if stages[-1].converged:
+        if stages[-1].converged or stages[-1].name == DEFERRED_STAGE:
             best = outcome
             break
         if best is None or state.evaluation.cost < best[0].evaluation.cost:
             best = outcome
-    if unmeasured:
+    deferred = stages[-1].name == DEFERRED_STAGE
+    if unmeasured and not deferred:
         best = _restarts_along_unmeasured_springs(
             problem, ms, nodes, velocity, stages, counter, progress, best
         )
     sensor_std = problem.channel_std.copy()
     rounds = 0
     state = best[0]
-    mismatch = ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS
+    mismatch = deferred or ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS
     if options.noise == "estimate" or (options.noise == "auto" and mismatch):
         problem, ms, best, rounds = _estimate_noise(
             problem, ms, best, recordings, stages, counter, progress
@@ -587,7 +589,7 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
         stages.append(_equation_error_report(time.perf_counter() - start, used))
     active = np.ones(n_free, dtype=bool)
     state, gn = _solve(
-        problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass
+        problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass, True
     )
     stats = _stats(gn, state, problem)
     if options.noise != "sensor" and ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS:
@@ -644,9 +646,27 @@ def _hold_unidentified(problem, ms, state, gn, stats, stages, resolve):
     return state, gn, stats, held
 
 
-def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass=False):
+def _solve(
+    problem,
+    ms,
+    nodes,
+    velocity,
+    theta,
+    active,
+    stages,
+    counter,
+    progress,
+    prepass=False,
+    defer_on_mismatch=False,
+):
     """Output-error stages from ``theta``: moving windows (exact, penalty fallback), then
-    every window with uniform substeps. Returns the final solver state and solver."""
+    every window with uniform substeps. Returns the final solver state and solver.
+
+    With ``defer_on_mismatch`` (the first solve of a fit whose noise levels may be
+    estimated), moving windows that end far above the sensors' noise level skip the
+    all-window stages, leaving them to the noise rounds (the last stage is then
+    ``DEFERRED_STAGE``, not converged). Restarts and holds never defer: their outcome is
+    judged by a converged all-window stage."""
     options = problem.options
     smoothing = problem.smoothing
     schedule = options.smoothing_schedule
@@ -699,9 +719,8 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
                 break
         counter["evaluations"] += gn_sub.evaluations
         theta = sub_state.theta
-        mismatch = (
-            options.noise != "sensor" and sub.residual_rms(sub_state.evaluation.cost) > MISMATCH_RMS
-        )
+        moving_rms = sub.residual_rms(sub_state.evaluation.cost)
+        mismatch = defer_on_mismatch and options.noise != "sensor" and moving_rms > MISMATCH_RMS
         known = np.zeros(ms.n_windows, dtype=bool)
         known[moving] = True
         # The first moving window of each stretch starts at rest (it is the margin before
@@ -726,6 +745,19 @@ def _solve(problem, ms, nodes, velocity, theta, active, stages, counter, progres
         # rounds (``_estimate_noise``), which start from here.
         state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
         state.evaluation = ms.evaluate(nodes, theta, smoothing, velocity_hint=velocity)
+        stages.append(
+            StageReport(
+                name=DEFERRED_STAGE,
+                smoothing=smoothing,
+                iterations=0,
+                converged=False,
+                message=f"residual rms {moving_rms:.3g} sensor std on the moving windows: "
+                "the model does not follow the data at the sensors' noise level",
+                cost=state.evaluation.cost,
+                max_defect=float(np.max(np.abs(ms.defects(state.evaluation, nodes)), initial=0)),
+                wall_time_s=0.0,
+            )
+        )
         return state, gn
     # Exact continuity from the nodes so far; if that fails (nodes at rest simulated with
     # parameters that are still off, e.g. an unmeasured pulley's stretch at rest), the same

@@ -72,6 +72,12 @@ class FitOptions:
     channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
         by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
         std for positions (both from the recording's rig metadata).
+    latency_samples : ``{output name: samples}``, whole samples a sensor lags the plant
+        (the laser's read-out latency, from its data sheet): the channel's sample k + d is
+        compared with the model at sample k. Latency is not estimated: in steady motion a
+        laser lagging the encoder is indistinguishable from belt stretch, and an unknown
+        2-sample laser latency biased Coulomb friction 9x on the realistic rig
+        (docs/fitting.md, "Model mismatch").
     consider : ``{name: relative std}`` of held parameters whose uncertainty the intervals
         include (consider covariance, ``hframe_id.fitting.consider``). ``None`` (default):
         the variant's ``VARIANT_FIXED`` table values and any parameter held for
@@ -129,6 +135,7 @@ class FitOptions:
     bound_factor: float = 10.0
     channel_std: Mapping[str, float] = field(default_factory=dict)
     noise: str = "auto"
+    latency_samples: Mapping[str, int] = field(default_factory=dict)
     consider: Mapping[str, float] | None = None
     shooting_interval: int = 10
     smoothing: tuple[float, float] | None = None
@@ -223,6 +230,16 @@ class FitOptions:
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
         _positive("max_substeps", self.max_substeps, integer=True)
+        if not isinstance(self.latency_samples, Mapping):
+            raise OptionError(
+                f"latency_samples must map output names to samples, got {self.latency_samples!r}"
+            )
+        for name, value in self.latency_samples.items():
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
+                raise OptionError(
+                    f"latency_samples[{name!r}] must be a whole number of samples in 0..100, "
+                    f"got {value!r}"
+                )
         if self.consider is not None:
             if not isinstance(self.consider, Mapping):
                 raise OptionError(
@@ -256,6 +273,7 @@ class FitOptions:
             "bound_factor": float(self.bound_factor),
             "channel_std": {k: float(v) for k, v in self.channel_std.items()},
             "noise": self.noise,
+            "latency_samples": {k: int(v) for k, v in self.latency_samples.items()},
             "consider": "default" if self.consider is None else dict(self.consider),
             "shooting_interval_samples": int(self.shooting_interval),
             "smoothing": list(self.smoothing) if self.smoothing else "model default",

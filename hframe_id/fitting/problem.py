@@ -194,7 +194,9 @@ def _check_rigs(recordings: Sequence[Recording]) -> None:
             )
 
 
-def _prepare(rec: Recording, model: Model) -> Experiment:
+def _prepare(rec: Recording, model: Model, latency: dict[str, int]) -> Experiment:
+    """The recording on the model's inputs and outputs; a channel with a latency of d
+    samples (``FitOptions.latency_samples``) is advanced by d, its last d samples invalid."""
     inputs = applied_inputs(rec)
     in_names = [s.name for s in model.inputs]
     if tuple(rec.input_names) != tuple(in_names):
@@ -212,6 +214,11 @@ def _prepare(rec: Recording, model: Model) -> Experiment:
         columns.append(list(rec.output_names).index(out.name))
     outputs = np.asarray(rec.outputs, dtype=float)[:, columns]
     valid = np.asarray(rec.valid, dtype=bool)[:, columns] & np.isfinite(outputs)
+    for j, out in enumerate(model.outputs):
+        lag = latency.get(out.name, 0)
+        if lag:
+            outputs[:-lag, j], valid[:-lag, j] = outputs[lag:, j], valid[lag:, j]
+            valid[-lag:, j] = False
     if not np.all(np.isfinite(inputs)):
         raise FitError(f"{rec.name()}: inputs contain non-finite values")
     if rec.aborted:
@@ -284,7 +291,14 @@ def build_problem(
                 f"channel_std: unknown output {name!r}{_suggest(name, outputs)}; "
                 f"valid: {', '.join(outputs)}"
             )
-    experiments = tuple(_prepare(rec, model) for rec in recordings)
+    for name in options.latency_samples:
+        if name not in outputs:
+            raise FitError(
+                f"latency_samples: unknown output {name!r}{_suggest(name, outputs)}; "
+                f"valid: {', '.join(outputs)}"
+            )
+    latency = dict(options.latency_samples)
+    experiments = tuple(_prepare(rec, model, latency) for rec in recordings)
     std = np.array(
         [
             options.channel_std.get(name) or default_channel_std(recordings[0], name)

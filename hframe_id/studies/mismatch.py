@@ -130,11 +130,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--noise-seeds", type=int, nargs="*", default=[], help="coverage: noise seeds of plant -1"
     )
+    parser.add_argument(
+        "--latency",
+        default="",
+        help="FitOptions.latency_samples as CHANNEL=SAMPLES,... (the shipped plant: one "
+        "sample of actuation delay and two of laser latency: phi1=1,phi2=1,x=3,y=3)",
+    )
     args = parser.parse_args(argv)
+    latency = {
+        name: int(value)
+        for name, _, value in (item.partition("=") for item in args.latency.split(",") if item)
+    }
+    options = FitOptions(latency_samples=latency)
     for seed in args.seeds:
-        print(_line(run_trial(seed)), flush=True)
+        print(_line(run_trial(seed, options=options)), flush=True)
     if args.noise_seeds:
-        trials = [run_trial(-1, noise_seed=s) for s in args.noise_seeds]
+        trials = [run_trial(-1, noise_seed=s, options=options) for s in args.noise_seeds]
         for t in trials:
             print(_line(t), flush=True)
         print(f"coverage of the across-seed mean: {coverage_of_mean(trials):.3f}")
