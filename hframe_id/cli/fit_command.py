@@ -12,7 +12,7 @@ from pathlib import Path
 
 from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting import FitOptions, FitResult, fit_recordings
-from hframe_id.fitting.options import NOISE_METHODS, UNCERTAINTY_METHODS
+from hframe_id.fitting.options import NOISE_METHODS, SOLVERS, UNCERTAINTY_METHODS
 from hframe_id.fitting.output import write_parameter_file
 from hframe_id.fitting.report import (
     MODELS_DIR,
@@ -50,6 +50,13 @@ def _float(text: str, what: str) -> float:
         return float(text)
     except ValueError:
         raise OptionError(f"{what}: {text!r} is not a number") from None
+
+
+def _samples(text: str, what: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise OptionError(f"{what}: {text!r} is not a whole number of samples") from None
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -140,6 +147,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="channel weights: 'sensor' the sensors' noise (--channel-std or the rig's "
         "noise model); 'estimate' noise levels estimated from the residuals; 'auto' "
         "estimated when the model does not follow the data at the sensors' noise level",
+    )
+    parser.add_argument(
+        "--solver",
+        choices=SOLVERS,
+        default=FitOptions.solver,
+        help="solver of the all-window stages: the condensed Gauss-Newton, or CasADi's "
+        "IPOPT (nlpsol, exact Gauss-Newton Hessian) on the same transcription",
+    )
+    parser.add_argument(
+        "--latency",
+        action="append",
+        default=[],
+        metavar="OUTPUT=SAMPLES",
+        help="whole samples a sensor lags the plant (repeatable, e.g. x=2 for a laser with "
+        "2 ms read-out latency at 1 kHz); not estimated: in steady motion it looks like "
+        "belt stretch",
     )
     parser.add_argument(
         "--shooting-interval",
@@ -275,6 +298,11 @@ def _options(args: argparse.Namespace) -> FitOptions:
         bound_factor=args.bound_factor,
         channel_std=channel_std,
         noise=args.noise,
+        solver=args.solver,
+        latency_samples={
+            name: _samples(value, f"--latency {name}")
+            for name, value in _pairs(args.latency, "--latency").items()
+        },
         shooting_interval=args.shooting_interval,
         smoothing=smoothing,
         smoothing_schedule=tuple(

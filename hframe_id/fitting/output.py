@@ -133,7 +133,12 @@ def provenance(
         },
         "initial_source": str(initial_path) if initial_path else result.initial.source,
         "solver": {
-            "method": "multiple shooting, Gauss-Newton on the lifted problem (CasADi)",
+            "method": "multiple shooting, "
+            + (
+                "IPOPT (CasADi nlpsol, Gauss-Newton Hessian)"
+                if result.options.solver == "ipopt"
+                else "Gauss-Newton on the lifted problem (CasADi)"
+            ),
             "success": bool(result.success),
             "message": result.message,
             "iterations": int(result.iterations),
