@@ -114,3 +114,16 @@ def test_ipopt_solver_reaches_the_gauss_newton_optimum():
     for name in ("k_l", "b_bridge"):
         a, b = (fits[s].estimates[name].estimate for s in fits)
         assert a == pytest.approx(b, rel=1e-4), name
+
+
+def test_held_parameters_and_their_prior_are_stated():
+    """A fit with held table values says which, at what value and with what prior."""
+    from hframe_id.fitting.fit import FitResult
+
+    result = FitResult.__new__(FitResult)
+    result.diagnostics = {"consider": {"held_relative_std": {"J_2": 0.2}}}
+    result.parameters = load_parameter_file(MODELS / "one-axis-table2.3.yaml")
+    statement = result.held_statement()
+    assert "J_2 = 6.3e-05 (+/-20 %)" in statement and "consider covariance" in statement
+    result.diagnostics = {"consider": {"held_relative_std": {}}}
+    assert result.held_statement() is None

@@ -432,6 +432,8 @@ def run(args: argparse.Namespace) -> int:
         result, recordings, paths, initial_path, out_dir, cross_validation
     )
     print(result.summary())
+    if held := result.held_statement():
+        print(held)
     _print_mismatch(result)
     if parameter_file:
         print(f"parameter file: {parameter_file}")

@@ -159,6 +159,22 @@ class FitResult:
         1 for a correct model on sim-rig data)."""
         return float(self.diagnostics.get("residual_rms_noise_std", math.nan))
 
+    def held_statement(self) -> str | None:
+        """What the intervals assume about held parameters (None if nothing is held with a
+        prior): which parameters, at which values, with which prior relative std."""
+        prior = self.diagnostics.get("consider", {}).get("held_relative_std", {})
+        if not prior:
+            return None
+        held = ", ".join(
+            f"{name} = {self.parameters.values[name]:.4g} (+/-{100 * std:.0f} %)"
+            for name, std in prior.items()
+        )
+        return (
+            f"Held at the initial file's values, not fitted: {held}. The intervals include "
+            "this prior uncertainty of the held values (consider covariance, linearised at the "
+            "optimum); they do not assume the held values are exact."
+        )
+
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted +/- 95 %, identified."""
         lines = [f"{'parameter':<22} {'initial':>11} {'fitted':>11} {'95 % interval':>25}  status"]

@@ -189,9 +189,11 @@ def uncertainty(result: FitResult) -> dict[str, Any]:
             "at_bound": bool(est.at_bound),
             **({"identified_by": list(est.identified_by)} if est.identified_by else {}),
         }
+    held = result.held_statement()
     return {
         "method": result.options.uncertainty,
         "confidence": level,
+        **({"held_parameters": held} if held else {}),
         "parameters": per_parameter,
         "correlation": {
             "parameters": list(result.free_names),

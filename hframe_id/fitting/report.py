@@ -386,6 +386,7 @@ def _report_lines(
         intro += f" {truth_note}"
     else:
         intro += "." + (f" {truth_note}" if truth_note else "")
+    held = result.held_statement()
     lines += [
         "## Parameters",
         "",
@@ -393,6 +394,7 @@ def _report_lines(
         "",
         *parameter_table(result, thesis, label, truth, truth_label),
         "",
+        *([held, ""] if held else []),
         *_not_identified_lines(result),
     ]
     if cross_validation is not None:
