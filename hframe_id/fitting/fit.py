@@ -415,7 +415,7 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
         rms = np.array(list(_channel_rms(ms, state.evaluation).values()))
         std = np.maximum(np.where(np.isfinite(rms), rms, problem.channel_std), sensor_std)
         change = float(np.max(np.abs(np.log(std / problem.channel_std))))
-        if rounds > 1 and change <= NOISE_RTOL:
+        if rounds > 1 and change <= NOISE_RTOL and stages[-1].converged:
             rounds -= 1
             break
         weights = dict(zip(problem.output_names, std.tolist(), strict=True))

@@ -61,6 +61,8 @@ FREE_STEPS = 2
 #: in 0.9 s.
 GIVE_UP_DECREASE = 0.2
 GIVE_UP_NOISE_RATIO = 10.0
+#: Iterations over which an exact stage with ``cost_rtol`` judges the cost decrease.
+COST_WINDOW = 10
 #: Share of the removed l1 penalty a full exact-stage step must predict as merit decrease.
 MERIT_RHO = 0.1
 #: Textbook relative std (of log p) above which a parameter is not moved in an iteration.
@@ -433,10 +435,10 @@ class GaussNewton:
         Converged: the last step was a full Gauss-Newton step (trust region inactive) that
         changed no free parameter by more than ``step_tol`` (relative), and the continuity
         defects are below ``defect_tol`` (noise units). A stage may also stop once an
-        iteration lowers the cost by less than ``cost_rtol`` (relative; exact stages only
-        with the defects below ``defect_tol``). With ``give_up``,
-        a stage far from the noise level that stops making progress ends unconverged early
-        (for fast paths that have a fallback).
+        iteration lowers the cost by less than ``cost_rtol`` (relative; exact stages: on
+        average over ``COST_WINDOW`` iterations, with the defects below ``defect_tol``).
+        With ``give_up``, a stage far from the noise level that stops making progress ends
+        unconverged early (for fast paths that have a fallback).
         """
         start = time.perf_counter()
         ms = self.ms
@@ -467,6 +469,7 @@ class GaussNewton:
 
         best = (merit(ev, state.nodes), state.nodes, state.theta, ev)
         best_history = []
+        costs = [ev.cost]
         # Exact stages start with the watchdog; once it has had to step back, they continue
         # as a monotone trust-region method (so they cannot cycle).
         monotone = penalty is not None or not watchdog
@@ -476,7 +479,6 @@ class GaussNewton:
             accepted = False
             full_step = False
             step = 0.0
-            previous_cost = ev.cost
             current = merit(ev, state.nodes)
             free = state.active.copy()
             index = np.flatnonzero(free)
@@ -666,9 +668,14 @@ class GaussNewton:
                     f"{give_up} iterations, residual rms {ms.residual_rms(ev.cost):.3g} noise std"
                 )
                 break
+            costs.append(ev.cost)
+            # Exact stages judge the decrease over the last COST_WINDOW iterations (a crawl
+            # of tiny monotone steps along a valley lowers the cost a little every time).
+            span = 1 if penalty is not None else COST_WINDOW
             if (
                 cost_rtol > 0
-                and 0 <= previous_cost - ev.cost <= cost_rtol * ev.cost
+                and len(costs) > span
+                and 0 <= costs[-1 - span] - ev.cost <= span * cost_rtol * ev.cost
                 and (penalty is not None or max_defect <= defect_tol)
             ):
                 converged = True
