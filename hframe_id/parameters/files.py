@@ -85,9 +85,26 @@ def _one_line(err: yaml.YAMLError) -> str:
     return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark else problem
 
 
-def _suggest(word: str, choices: list[str]) -> str:
+def suggest(word: str, choices: list[str]) -> str:
+    """`` (did you mean 'x'?)`` for the choice closest to a mistyped word, or ''."""
     close = difflib.get_close_matches(word, choices, n=1, cutoff=0.5)
     return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def check_header(doc: Any, required: tuple[str, ...], optional: tuple[str, ...], where: str):
+    """A YAML document is a mapping with every ``required`` header key and no key outside
+    ``required + optional`` (``ParameterFileError`` naming the file and the key)."""
+    if not isinstance(doc, Mapping):
+        raise ParameterFileError(f"{where}: expected a YAML mapping with a header, got {doc!r}")
+    allowed = required + optional
+    for key in doc:
+        if key not in allowed:
+            raise ParameterFileError(
+                f"{where}: unknown header key {key!r}{suggest(str(key), list(allowed))}"
+            )
+    for key in required:
+        if key not in doc:
+            raise ParameterFileError(f"{where}: missing header key {key!r}")
 
 
 def check_values(variant: str, values: Mapping[str, float], path: Path | None = None) -> None:
@@ -100,7 +117,7 @@ def check_values(variant: str, values: Mapping[str, float], path: Path | None = 
     for name in values:
         if name not in specs:
             raise ParameterFileError(
-                f"{where}: unknown parameter {name!r}{_suggest(name, list(specs))}"
+                f"{where}: unknown parameter {name!r}{suggest(name, list(specs))}"
             )
     for spec in specs.values():
         if spec.required and spec.name not in values:
@@ -138,7 +155,7 @@ def _values_from_keys(variant: str, raw: Any, where: str) -> dict[str, float]:
         if key not in by_key:
             raise ParameterFileError(
                 f"{where}: unknown parameter key {key!r} (value {value!r})"
-                f"{_suggest(str(key), list(by_key))} for model {variant}"
+                f"{suggest(str(key), list(by_key))} for model {variant}"
             )
         values[by_key[key].name] = value
     return values
@@ -164,22 +181,12 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
         doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
         raise ParameterFileError(f"{where}: not valid YAML ({_one_line(err)})") from None
-    if not isinstance(doc, Mapping):
-        raise ParameterFileError(f"{where}: expected a YAML mapping with a header, got {doc!r}")
-    allowed = _REQUIRED_HEADER + _OPTIONAL_HEADER
-    for key in doc:
-        if key not in allowed:
-            raise ParameterFileError(
-                f"{where}: unknown header key {key!r}{_suggest(str(key), list(allowed))}"
-            )
-    for key in _REQUIRED_HEADER:
-        if key not in doc:
-            raise ParameterFileError(f"{where}: missing header key {key!r}")
+    check_header(doc, _REQUIRED_HEADER, _OPTIONAL_HEADER, where)
     _check_format_version(doc["format_version"], where)
     model = doc["model"]
     if model not in VARIANTS:
         raise ParameterFileError(
-            f"{where}: model {model!r} is not a variant{_suggest(str(model), list(VARIANTS))};"
+            f"{where}: model {model!r} is not a variant{suggest(str(model), list(VARIANTS))};"
             f" valid: {', '.join(VARIANTS)}"
         )
     if variant is not None and model != variant:

@@ -32,7 +32,6 @@ the file and the field.
 
 from __future__ import annotations
 
-import difflib
 import math
 import os
 import tempfile
@@ -48,7 +47,7 @@ from hframe_id.atomic import replace_atomically
 from hframe_id.errors import HframeIdError, ModelError, ParameterFileError
 from hframe_id.models import Model, ModelOptions, build_model
 from hframe_id.parameters import ParameterSet, load_parameter_file
-from hframe_id.parameters.files import to_document
+from hframe_id.parameters.files import check_header, suggest, to_document
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.simulation.realistic import PlantConstants, realistic_substeps
 
@@ -184,11 +183,6 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _suggest(word: str, choices: list[str]) -> str:
-    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.5)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
 def _section(doc: Mapping, name: str, keys: dict[str, str], where: str) -> dict[str, Any]:
     raw = doc.get(name, {})
     if not isinstance(raw, Mapping):
@@ -196,7 +190,7 @@ def _section(doc: Mapping, name: str, keys: dict[str, str], where: str) -> dict[
     for key in raw:
         if key not in keys:
             raise ParameterFileError(
-                f"{where}: unknown key {name}.{key!s}{_suggest(str(key), list(keys))}"
+                f"{where}: unknown key {name}.{key!s}{suggest(str(key), list(keys))}"
             )
     missing = [key for key in keys if key not in raw]
     if missing:
@@ -234,17 +228,7 @@ def plant_from_document(
     folder : where a ``parameters`` path is relative to.
     path : the file it came from, if any.
     """
-    if not isinstance(doc, Mapping):
-        raise ParameterFileError(f"{where}: expected a YAML mapping with a plant header")
-    allowed = _HEADER + _OPTIONAL
-    for key in doc:
-        if key not in allowed:
-            raise ParameterFileError(
-                f"{where}: unknown key {key!r}{_suggest(str(key), list(allowed))}"
-            )
-    for key in _HEADER:
-        if key not in doc:
-            raise ParameterFileError(f"{where}: missing header key {key!r}")
+    check_header(doc, tuple(_HEADER), tuple(_OPTIONAL), where)
     if str(doc["format_version"]).split(".")[0] != FORMAT_VERSION.split(".")[0]:
         raise ParameterFileError(
             f"{where}: unknown format_version {doc['format_version']!r}; this hframe-id reads "
