@@ -43,7 +43,6 @@ import os
 import statistics
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -57,12 +56,12 @@ from hframe_id.fitting.baseline_scipy import (
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.simulated import simulate_recording
+from hframe_id.resources import datasets_dir, models_dir, portable_path
 
-ROOT = Path(__file__).resolve().parents[2]
-DATASETS = ROOT / "datasets"
+DATASETS = datasets_dir()
 TRUTH = DATASETS / "truth" / "hframe-8-rig.yaml"
-FALLBACK_TRUTH = ROOT / "models" / "hframe-8-table4.2.yaml"
-TABLE_4_2 = ROOT / "models" / "hframe-8-table4.2.yaml"
+FALLBACK_TRUTH = models_dir() / "hframe-8-table4.2.yaml"
+TABLE_4_2 = models_dir() / "hframe-8-table4.2.yaml"
 REALISTIC = DATASETS / "realistic"
 #: (file stem, motor 1 [V], motor 2 [V]) of the six H-frame experiments (section 4.4).
 EXPERIMENTS = (
@@ -341,7 +340,7 @@ def _realistic_vs_matched(realistic_repeats: int) -> None:
         ("realistic", REALISTIC, max(1, realistic_repeats)),
     )
     print(
-        f"start: {TABLE_4_2.relative_to(ROOT)}; fitter defaults (noise levels from the sensor, "
+        f"start: {portable_path(TABLE_4_2)}; fitter defaults (noise levels from the sensor, "
         f"or estimated where the model cannot follow the data)"
     )
     medians = {}
@@ -350,7 +349,7 @@ def _realistic_vs_matched(realistic_repeats: int) -> None:
         paths = [folder / f"{stem}.mcap" for stem, _, _ in EXPERIMENTS]
         missing = [p.name for p in paths if not p.exists()]
         if missing:
-            print(f"{label}: {folder.relative_to(ROOT)} lacks {', '.join(missing)}; skipped")
+            print(f"{label}: {portable_path(folder)} lacks {', '.join(missing)}; skipped")
             continue
         recordings = [read_recording(p) for p in paths]
         runs = [_run_fitter(fitter, recordings, start) for _ in range(repeats)]
@@ -358,7 +357,7 @@ def _realistic_vs_matched(realistic_repeats: int) -> None:
         rows.append((label, runs))
         times = ", ".join(f"{r['time']:.1f}" for r in runs)
         print(
-            f"{label}: {folder.relative_to(ROOT)}/{{2,4,6}}V_{{x,y}}motion.mcap "
+            f"{label}: {portable_path(folder)}/{{2,4,6}}V_{{x,y}}motion.mcap "
             f"({recordings[0].variant} recordings), times {times} s",
             flush=True,
         )

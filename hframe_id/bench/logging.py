@@ -15,11 +15,12 @@ from hframe_id.bench import heading, median_time
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.reader import read_log, read_recording
 from hframe_id.recordings.writer import LogWriter
+from hframe_id.resources import models_dir
 from hframe_id.rig.logger import RunOptions, run_experiment
 from hframe_id.rig.protocols import StepProtocol
 from hframe_id.rig.sim import SimRig
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = models_dir()
 PLANT = MODELS / "hframe-8-table4.2.yaml"
 N_MESSAGES = 20_000
 REAL_TIME_S = 2.0

@@ -17,7 +17,6 @@ are not asserted anywhere: shared 2-core machines are noisy, the ratios are the 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -29,12 +28,13 @@ from hframe_id.control.pid import ControllerOptions, ResetWindupPID
 from hframe_id.control.trajectory import motor_angles, square
 from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
+from hframe_id.resources import models_dir
 from hframe_id.simulation.compiled import evaluate
 from hframe_id.simulation.friction import FrictionOptions
 from hframe_id.simulation.integrators import rk4_step, stable_substeps
 from hframe_id.simulation.open_loop import _trajectory_function, simulate
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = models_dir()
 PLANT = MODELS / "hframe-8-table4.2.yaml"
 DT = 1e-3
 CLOSED_LOOP_TARGET_S = 4e-3

@@ -24,11 +24,12 @@ from hframe_id.fitting.report import (
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import read_recording
 from hframe_id.recordings.recording import Recording
+from hframe_id.resources import datasets_dir
 from hframe_id.validation.cross_validation import LeaveOneOutTable, leave_one_out
 
 #: Where bare recording names are looked up: the working directory's datasets/, then the
-#: project's shipped datasets/.
-DATASETS_DIRS = (Path("datasets"), MODELS_DIR.parent / "datasets")
+#: shipped datasets/ (the checkout's, or an installed package's).
+DATASETS_DIRS = (Path("datasets"), datasets_dir())
 
 
 def _names(text: str) -> tuple[str, ...]:

@@ -28,9 +28,7 @@ from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.report import mismatch_statement, output_units
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
-
-#: The project checkout (datasets inside it are recorded relative to it).
-PROJECT_ROOT = Path(__file__).resolve().parents[2]
+from hframe_id.resources import portable_path, project_root
 
 
 def sha256_of(path: Path) -> str:
@@ -42,8 +40,11 @@ def sha256_of(path: Path) -> str:
 
 
 def git_commit() -> str:
-    """The source tree's commit (with ``-dirty`` if it has changes), or ``"unknown"``."""
-    root = Path(__file__).resolve().parents[2]
+    """The source tree's commit (with ``-dirty`` if it has changes), or ``"unknown"`` (also
+    when installed from a wheel: a git repository around site-packages is not its source)."""
+    root = project_root()
+    if root is None:
+        return "unknown"
     try:
         commit = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
@@ -82,16 +83,6 @@ def unused_fit_id(out_dir: Path, fit_id: str) -> str:
     return candidate
 
 
-def _portable(path: Path) -> str:
-    """A dataset's path as provenance: relative to the project root when inside it (the
-    same on every clone), absolute otherwise (never relative to the working directory)."""
-    absolute = Path(path).resolve()
-    try:
-        return str(absolute.relative_to(PROJECT_ROOT))
-    except ValueError:
-        return str(absolute)
-
-
 def _number(value: float) -> float:
     return float(f"{value:.10g}")
 
@@ -118,7 +109,7 @@ def provenance(
         },
         "datasets": [
             {
-                "file": _portable(path),
+                "file": portable_path(path),
                 "sha256": digest,
                 "samples": rec.n_samples,
                 "duration_s": _number(rec.duration_s),

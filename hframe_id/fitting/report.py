@@ -28,10 +28,11 @@ from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.recordings.recording import Recording
+from hframe_id.resources import models_dir
 from hframe_id.simulation.open_loop import simulate
 from hframe_id.validation.cross_validation import LeaveOneOutTable
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+MODELS_DIR = models_dir()
 #: The thesis's parameter set each variant's fit is compared with.
 THESIS_REFERENCE = {
     "hframe-8": ("hframe-8-table4.2.yaml", "Table 4.1 + 4.2"),

@@ -16,7 +16,6 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -27,8 +26,9 @@ from hframe_id.fitting.problem import default_free
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
+from hframe_id.resources import models_dir
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = models_dir()
 START_FILES = {"hframe-8": "hframe-8-table4.2.yaml", "one-axis": "one-axis-table2.3.yaml"}
 
 

@@ -37,13 +37,14 @@ import yaml
 
 from hframe_id.errors import OptionError, ParameterFileError
 from hframe_id.parameters import ParameterSet, load_parameter_file, save_parameter_file
+from hframe_id.resources import models_dir
 from hframe_id.rig.logger import RunOptions, RunSummary, run_experiment
 from hframe_id.rig.plant import Plant, load_plant_file, save_plant_file
 from hframe_id.rig.protocols import MultisineProtocol, PulseProtocol, StepProtocol
 from hframe_id.rig.realistic import shipped_plant
 from hframe_id.rig.sim import SimRig
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+MODELS_DIR = models_dir()
 MANIFEST = "manifest.yaml"
 #: Nominal start time of every shipped recording (fixed so that files are reproducible).
 NOMINAL_START = dt.datetime(2025, 1, 1, tzinfo=dt.UTC)

@@ -25,20 +25,19 @@ same samples as the ``sim`` rig given the plant (to integration round-off).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from hframe_id.errors import OptionError
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.sensors import SensorModel, measure_batch, split_outputs
+from hframe_id.resources import models_dir
 from hframe_id.rig.plant import Plant
 from hframe_id.simulation.friction import STICK_BAND_ANGULAR_RAD_PER_S, STICK_BAND_LINEAR_M_PER_S
 from hframe_id.simulation.open_loop import SimulationResult
 from hframe_id.simulation.realistic import PlantConstants, simulate_realistic
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+MODELS_DIR = models_dir()
 REALISTIC_VARIANTS = ("hframe-20", "one-axis")
 
 #: Effects shared by the shipped plants (docs/realistic-rig.md, "assumed values").

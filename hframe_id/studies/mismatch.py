@@ -17,20 +17,20 @@ import argparse
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.recording import Recording
+from hframe_id.resources import model_file
 from hframe_id.rig.plant import Plant
 from hframe_id.rig.protocols import MultisineProtocol, StepProtocol
 from hframe_id.rig.realistic import realistic_plant, record_realistic, shipped_plant
 from hframe_id.validation.metrics import fit_percent
 from hframe_id.validation.replay import simulate_channels
 
-TABLE_4_2 = Path(__file__).resolve().parents[2] / "models" / "hframe-8-table4.2.yaml"
+TABLE_4_2 = model_file("hframe-8-table4.2.yaml")
 #: The six section-4.4 steps: (volts, motion) with motor 1 / motor 2 = -V / -V (y), -V / +V (x).
 STEPS = ((2, "y"), (2, "x"), (4, "y"), (4, "x"), (6, "y"), (6, "x"))
 #: Held-out recordings: a 3 V multisine (small motions, many reversals: the friction regime)
