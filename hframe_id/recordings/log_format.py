@@ -3,8 +3,11 @@
 An MCAP file with JSON messages described by JSON Schema (``jsonschema`` encoding), so that any
 MCAP reader (and Foxglove) can open and plot it. Three topics:
 
-- ``/rig/sample``: one flat message per sample (sequence, device time, commanded voltages,
-  encoder counts and angles, laser positions with validity, limit switches).
+- ``/rig/sample``: one flat message per sample, in one of two schemas: ``hframe_id.RigSample``
+  (the H-frame rig's fixed fields: sequence, device time, commanded voltages, encoder counts
+  and angles, laser positions with validity, limit switches; format 1.0) or
+  ``hframe_id.SignalSample`` (any rig: one number per channel declared in the ``rig``
+  metadata; format 1.1, ``hframe_id.recordings.channels``).
 - ``/rig/event``: start, stop, abort and why, limit trips, link faults, clamping.
 - ``/rig/status``: link and timing statistics, about every 100 ms.
 
@@ -17,11 +20,15 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping
 from typing import Any
 
-#: Format version written into ``experiment.format_version``; readers accept the same major.
+#: Format version written into ``experiment.format_version`` of ``RigSample`` recordings (the
+#: lowest version with every feature such a file uses); readers accept the same major.
 FORMAT_VERSION = "1.0"
+#: Format version of ``SignalSample`` recordings (the minor version that introduced them).
+SIGNAL_FORMAT_VERSION = "1.1"
 SUPPORTED_MAJOR = 1
 
 SAMPLE_TOPIC = "/rig/sample"
@@ -29,6 +36,7 @@ EVENT_TOPIC = "/rig/event"
 STATUS_TOPIC = "/rig/status"
 
 SAMPLE_SCHEMA_NAME = "hframe_id.RigSample"
+SIGNAL_SAMPLE_SCHEMA_NAME = "hframe_id.SignalSample"
 EVENT_SCHEMA_NAME = "hframe_id.RigEvent"
 STATUS_SCHEMA_NAME = "hframe_id.RigStatus"
 
@@ -178,6 +186,23 @@ RIG_REQUIRED = (
     "laser_min_m",
     "laser_max_m",
 )
+#: Keys every ``rig`` metadata record of a ``SignalSample`` recording has.
+SIGNAL_RIG_REQUIRED = (
+    "variant",
+    "backend",
+    "sample_period_s",
+    "inputs",
+    "input_units",
+    "outputs",
+    "output_units",
+)
+#: Prefix of the ``rig`` keys declaring an output's sensor noise: ``noise_std_<output>``.
+NOISE_STD_PREFIX = "noise_std_"
+#: ``noise_std_<output>`` value asking the fitter to estimate that output's noise.
+NOISE_ESTIMATE = "estimate"
+#: A model variant name: letters, digits, '-' and '_' (which model it names is for the model
+#: that consumes the recording to check).
+VARIANT_PATTERN = re.compile(r"[A-Za-z0-9_-]+\Z")
 #: Keys every ``experiment`` metadata record has.
 EXPERIMENT_REQUIRED = (
     "format_version",
@@ -218,6 +243,22 @@ STRING_KEYS = frozenset(
         "notes",
         "protocol.source",
         "protocol.sha256",
+        "variant",
+        "backend",
+        "name",
+        "inputs",
+        "input_units",
+        "outputs",
+        "output_units",
+        "signals",
+        "signal_units",
+        "output_validity",
+        "description",
+        "citation",
+        "source.file",
+        "source.format",
+        "source.sha256",
+        "source.map",
     }
 )
 
@@ -246,6 +287,19 @@ def _parse_scalar(text: str) -> Any:
 def split_list(value: Any) -> tuple[str, ...]:
     """A comma-separated metadata list as a tuple of names."""
     return tuple(v.strip() for v in str(value).split(",") if v.strip())
+
+
+def parse_noise_std(value: Any) -> float | str:
+    """A ``noise_std_<output>`` metadata value: a float > 0 (SI) or ``"estimate"``.
+
+    Raises ValueError naming the value otherwise.
+    """
+    if value == NOISE_ESTIMATE:
+        return NOISE_ESTIMATE
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        if math.isfinite(value) and value > 0:
+            return float(value)
+    raise ValueError(f"must be a number > 0 (SI) or {NOISE_ESTIMATE!r}, got {value!r}")
 
 
 def schema_bytes(schema: Mapping[str, Any]) -> bytes:

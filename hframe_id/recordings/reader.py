@@ -4,7 +4,8 @@
 which a killed writer never wrote) and keeps everything up to the last complete, CRC-valid
 chunk. ``read_recording`` checks that the content is an hframe-id recording (schemas, format
 version, metadata, every sample field, monotonic time, sequence numbers, finite values) and
-returns a ``Recording``.
+returns a ``Recording``; the sample messages of either schema are decoded by
+``hframe_id.recordings.samples``.
 
 Problems that make a file unusable raise ``LogFormatError`` naming the file and what is wrong.
 Problems that leave usable data are warnings: ``TruncatedRecordingWarning`` (the writer was
@@ -20,11 +21,11 @@ import tempfile
 import warnings
 import zlib
 from dataclasses import dataclass, field
+from functools import partial
 from io import BytesIO
 from pathlib import Path
 from typing import Any
 
-import jsonschema
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -32,11 +33,11 @@ from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, 
 from mcap.stream_reader import breakup_chunk
 
 from hframe_id.errors import HframeIdError, LogFormatError
-from hframe_id.models import VARIANTS
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import log_format as fmt
+from hframe_id.recordings.channels import Channels
 from hframe_id.recordings.recording import Recording
-from hframe_id.recordings.sensors import ENCODER_OUTPUTS, LASER_OUTPUTS
+from hframe_id.recordings.samples import decode_rig_samples, decode_signal_samples
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -194,18 +195,23 @@ def _add(log: LogContents, record: Any) -> None:
 
 # -- validation ------------------------------------------------------------------------------
 
-_SAMPLE_VALIDATOR = jsonschema.Draft202012Validator(fmt.SAMPLE_SCHEMA)
+#: Sample schema name -> the rig metadata keys its recordings must have.
+_SAMPLE_SCHEMAS = {
+    fmt.SAMPLE_SCHEMA_NAME: fmt.RIG_REQUIRED,
+    fmt.SIGNAL_SAMPLE_SCHEMA_NAME: fmt.SIGNAL_RIG_REQUIRED,
+}
 
 
 def read_recording(path: str | os.PathLike) -> Recording:
-    """Read, validate and return a recording.
+    """Read, validate and return a recording (either sample schema).
 
     Raises
     ------
     LogFormatError
         Not an MCAP file, empty, not an hframe-id recording (other schema), unknown major
-        format version, missing metadata or sample fields, non-monotonic time or sequence,
-        non-finite values, nothing recoverable.
+        format version, missing metadata or sample fields, a variant name that is not an
+        identifier, an inconsistent channel declaration or noise level, non-monotonic time or
+        sequence, non-finite values, nothing recoverable.
 
     Warns
     -----
@@ -231,14 +237,15 @@ def read_recording(path: str | os.PathLike) -> Recording:
     schema = log.schemas.get(channel.schema_id)
     if (
         schema is None
-        or schema.name != fmt.SAMPLE_SCHEMA_NAME
+        or schema.name not in _SAMPLE_SCHEMAS
         or schema.encoding != "jsonschema"
         or channel.message_encoding != "json"
     ):
         found = f"{schema.name!r} ({schema.encoding})" if schema else "no schema"
+        expected = " or ".join(repr(name) for name in _SAMPLE_SCHEMAS)
         raise LogFormatError(
             f"{where}: {fmt.SAMPLE_TOPIC} has schema {found} with {channel.message_encoding!r}"
-            f" messages; expected {fmt.SAMPLE_SCHEMA_NAME!r} (jsonschema) with 'json' messages"
+            f" messages; expected {expected} (jsonschema) with 'json' messages"
         )
     experiment = _metadata(log, "experiment", fmt.EXPERIMENT_REQUIRED)
     version = experiment["format_version"]
@@ -247,60 +254,37 @@ def read_recording(path: str | os.PathLike) -> Recording:
             f"{where}: unknown log format version {version!r}; this hframe-id reads "
             f"{fmt.SUPPORTED_MAJOR}.x"
         )
-    rig = _metadata(log, "rig", fmt.RIG_REQUIRED)
-    variant = rig["variant"]
-    if variant not in VARIANTS:
+    rig = _metadata(log, "rig", _SAMPLE_SCHEMAS[schema.name])
+    variant = str(rig["variant"])
+    if not fmt.VARIANT_PATTERN.match(variant):
         raise LogFormatError(
-            f"{where}: rig.variant {variant!r} is not a model variant ({', '.join(VARIANTS)})"
+            f"{where}: rig.variant {variant!r} is not a model variant name (letters, digits, "
+            "'-', '_')"
         )
     sample_period_s = rig["sample_period_s"]
     if not isinstance(sample_period_s, int | float) or not sample_period_s > 0:
         raise LogFormatError(f"{where}: rig.sample_period_s must be > 0, got {sample_period_s!r}")
-    input_names = fmt.split_list(rig["inputs"])
-    output_names = fmt.split_list(rig["outputs"])
-    bad_inputs = [n for n in input_names if n not in ("u1", "u2")]
-    bad_outputs = [n for n in output_names if n not in ENCODER_OUTPUTS + LASER_OUTPUTS]
-    if not input_names or bad_inputs or not output_names or bad_outputs:
-        raise LogFormatError(
-            f"{where}: rig.inputs {rig['inputs']!r} / rig.outputs {rig['outputs']!r} must name "
-            "u1, u2 and phi1, phi2, x, y"
-        )
-
+    if schema.name == fmt.SAMPLE_SCHEMA_NAME:
+        decode = partial(decode_rig_samples, rig=rig)
+    else:
+        try:
+            channels = Channels.from_rig(rig)
+        except ValueError as err:
+            raise LogFormatError(f"{where}: rig metadata: {err}") from None
+        decode = partial(decode_signal_samples, channels=channels)
     messages = log.decoded(fmt.SAMPLE_TOPIC)
     if not messages:
         raise LogFormatError(f"{where}: no samples on {fmt.SAMPLE_TOPIC}")
-    _check_fields(where, messages)
-    sequence = _column(where, messages, "sequence", int)
-    device_time_us = _column(where, messages, "device_time_us", int)
-    _check_increasing(where, "sequence", sequence)
-    _check_increasing(where, "device_time_us", device_time_us)
+    samples = decode(where, messages)
+    _check_noise_std(where, rig, samples.output_names)
+    sequence = samples.sequence
     steps = np.diff(sequence)
     gap_at = np.flatnonzero(steps > 1)
     gaps = tuple((int(i + 1), int(steps[i] - 1)) for i in gap_at)
 
-    inputs = np.column_stack([_column(where, messages, f"{name}_V", float) for name in input_names])
-    outputs = np.empty((len(messages), len(output_names)))
-    valid = np.ones(outputs.shape, dtype=bool)
-    for j, name in enumerate(output_names):
-        if name in ENCODER_OUTPUTS:
-            _column(where, messages, f"encoder{name[-1]}_counts", int)
-            outputs[:, j] = _column(where, messages, f"{name}_rad", float)
-        else:
-            flag = _column(where, messages, f"laser_{name}_valid", bool)
-            value = _column(where, messages, f"laser_{name}_m", float, nullable=True)
-            bad = flag & ~np.isfinite(value)
-            if bad.any():
-                i = int(np.argmax(bad))
-                raise LogFormatError(
-                    f"{where}: sample {i} (sequence {sequence[i]}): laser_{name}_m is "
-                    f"{messages[i][f'laser_{name}_m']!r} although laser_{name}_valid is true"
-                )
-            outputs[:, j] = value
-            valid[:, j] = flag
-
     events = tuple(log.decoded(fmt.EVENT_TOPIC))
     aborted = any(e.get("kind") == "abort" for e in events)
-    time_s = (device_time_us - device_time_us[0]) * 1e-6
+    time_s = (samples.device_time_us - samples.device_time_us[0]) * 1e-6
     truth = _truth(log)
     if not log.complete:
         recovered = f"{len(messages)} samples ({time_s[-1]:.3f} s)" if len(time_s) else "nothing"
@@ -323,11 +307,20 @@ def read_recording(path: str | os.PathLike) -> Recording:
         variant=variant,
         sample_period_s=float(sample_period_s),
         time_s=time_s,
-        inputs=inputs,
-        input_names=input_names,
-        outputs=outputs,
-        output_names=output_names,
-        valid=valid,
+        inputs=samples.inputs,
+        input_names=samples.input_names,
+        outputs=samples.outputs,
+        output_names=samples.output_names,
+        valid=samples.valid,
+        units=dict(
+            zip(
+                samples.input_names + samples.output_names + samples.signal_names,
+                samples.input_units + samples.output_units + samples.signal_units,
+                strict=True,
+            )
+        ),
+        signals=samples.signals,
+        signal_names=samples.signal_names,
         rig=rig,
         experiment=experiment,
         truth=truth,
@@ -349,54 +342,20 @@ def _metadata(log: LogContents, name: str, required: tuple[str, ...]) -> dict[st
     return fmt.decode_metadata(raw)
 
 
-def _check_fields(where: str, messages: list[dict[str, Any]]) -> None:
-    first = messages[0]
-    if not isinstance(first, dict):
-        raise LogFormatError(f"{where}: sample 0 is not a JSON object")
-    error = jsonschema.exceptions.best_match(_SAMPLE_VALIDATOR.iter_errors(first))
-    if error is not None:
-        place = ".".join(str(p) for p in error.absolute_path) or "message"
-        raise LogFormatError(
-            f"{where}: sample 0 does not match the sample schema: {place}: {error.message}"
-        )
-    required = set(fmt.SAMPLE_SCHEMA["required"])
-    for i, message in enumerate(messages):
-        if not isinstance(message, dict) or not required.issubset(message):
-            missing = sorted(required - set(message)) if isinstance(message, dict) else ["all"]
-            raise LogFormatError(f"{where}: sample {i} lacks field(s) {', '.join(missing)}")
-
-
-def _column(
-    where: str, messages: list[dict[str, Any]], name: str, kind: type, nullable: bool = False
-) -> np.ndarray:
-    values = [m[name] for m in messages]
-    if kind is bool:
-        ok = [type(v) is bool for v in values]
-    elif kind is int:
-        ok = [type(v) is int for v in values]
-    else:
-        ok = [(type(v) in (int, float)) or (nullable and v is None) for v in values]
-    if not all(ok):
-        i = ok.index(False)
-        expected = {bool: "true/false", int: "an integer", float: "a number"}[kind]
-        raise LogFormatError(f"{where}: sample {i}: {name} must be {expected}, got {values[i]!r}")
-    if kind is float:
-        array = np.array([np.nan if v is None else v for v in values], dtype=float)
-        if not nullable and not np.isfinite(array).all():
-            i = int(np.argmax(~np.isfinite(array)))
-            raise LogFormatError(f"{where}: sample {i}: {name} is not finite ({values[i]!r})")
-        return array
-    return np.array(values, dtype=bool if kind is bool else np.int64)
-
-
-def _check_increasing(where: str, name: str, values: np.ndarray) -> None:
-    steps = np.diff(values)
-    if (steps <= 0).any():
-        i = int(np.argmax(steps <= 0)) + 1
-        raise LogFormatError(
-            f"{where}: {name} must increase strictly, but sample {i} has {values[i]} after "
-            f"{values[i - 1]}"
-        )
+def _check_noise_std(where: str, rig: dict[str, Any], outputs: tuple[str, ...]) -> None:
+    """Every ``noise_std_<output>`` key names an output and holds a float > 0 or 'estimate'."""
+    for key, value in rig.items():
+        if not key.startswith(fmt.NOISE_STD_PREFIX):
+            continue
+        output = key.removeprefix(fmt.NOISE_STD_PREFIX)
+        if output not in outputs:
+            raise LogFormatError(
+                f"{where}: rig.{key} names no output (outputs: {', '.join(outputs)})"
+            )
+        try:
+            fmt.parse_noise_std(value)
+        except ValueError as err:
+            raise LogFormatError(f"{where}: rig.{key} {err}") from None
 
 
 def _truth(log: LogContents) -> ParameterSet | None:

@@ -74,6 +74,9 @@ class LogWriter:
         only (byte-reproducible files from unpaced runs, e.g. the shipped datasets).
     overwrite : replace an existing file (and a leftover ``.partial``).
     compression : ``"zstd"``, ``"lz4"`` or ``"none"``.
+    sample_schema : JSON Schema of the ``/rig/sample`` messages, registered under its
+        ``title``: the H-frame rig's ``RigSample`` (default) or a recording's
+        ``SignalSample`` schema (``Channels.schema()``).
     """
 
     def __init__(
@@ -88,6 +91,7 @@ class LogWriter:
         flush_interval_s: float | None = DEFAULT_FLUSH_INTERVAL_S,
         overwrite: bool = False,
         compression: str = "zstd",
+        sample_schema: Mapping[str, Any] = fmt.SAMPLE_SCHEMA,
     ) -> None:
         if not chunk_duration_s > 0:
             raise OptionError(f"chunk_duration_s must be > 0 s, got {chunk_duration_s}")
@@ -124,7 +128,7 @@ class LogWriter:
         self._mcap.start(profile="", library=f"hframe-id/{__version__}")
         channels = {}
         for topic, name, schema in (
-            (fmt.SAMPLE_TOPIC, fmt.SAMPLE_SCHEMA_NAME, fmt.SAMPLE_SCHEMA),
+            (fmt.SAMPLE_TOPIC, sample_schema["title"], sample_schema),
             (fmt.EVENT_TOPIC, fmt.EVENT_SCHEMA_NAME, fmt.EVENT_SCHEMA),
             (fmt.STATUS_TOPIC, fmt.STATUS_SCHEMA_NAME, fmt.STATUS_SCHEMA),
         ):
