@@ -16,7 +16,7 @@ from setuptools.command.build_py import build_py
 ROOT = Path(__file__).resolve().parent
 #: Top-level folder -> the files shipped from it (glob patterns, relative to the folder).
 SHIPPED = {
-    "models": ("*.yaml",),
+    "models": ("*.yaml", "*.py"),
     "datasets": ("**/*.mcap", "**/*.yaml", "**/README*"),
 }
 TARGET = Path("hframe_id", "_data")

@@ -35,7 +35,9 @@ ONE_AXIS = MODELS / "one-axis-table2.3.yaml"
 
 def record(path: Path, params_file: Path, protocol, seed: int = 3, **rig_options) -> Path:
     rig = SimRig(load_parameter_file(params_file), seed=seed, paced=False, **rig_options)
-    run_experiment(rig, protocol, RunOptions(out=path, handle_signals=False))
+    # Chunks by sample time only: wall-clock flushes made the chunk count (which the salvage
+    # tests count on) depend on the machine's load.
+    run_experiment(rig, protocol, RunOptions(out=path, handle_signals=False, reproducible=True))
     return path
 
 

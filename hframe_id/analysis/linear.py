@@ -107,7 +107,7 @@ def linearize(params: ParameterSet, model: Model | None = None) -> LinearModel:
     model = model or build_model(params.variant)
     values = dict(params.values)
     notes: tuple[str, ...] = ()
-    coulomb = [spec.name for spec in model.parameters if spec.is_coulomb]
+    coulomb = [friction.coulomb for friction in model.frictions]
     if any(values[name] > 0 for name in coulomb):
         notes = (COULOMB_NOTE,)
     for name in coulomb:

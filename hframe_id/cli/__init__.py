@@ -21,6 +21,7 @@ from hframe_id.cli import (
     import_command,
     inspect_command,
     linearize_command,
+    model_files,
     models_command,
     params_command,
     record_command,
@@ -58,6 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for module in COMMAND_MODULES:
         module.register(subparsers)
+    for name in model_files.COMMANDS:
+        model_files.add_option(subparsers.choices[name])
     return parser
 
 
@@ -65,6 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        model_files.load(args)
         return int(args.handler(args) or 0)
     except HframeIdError as err:
         print(f"hframe-id: error: {err}", file=sys.stderr)

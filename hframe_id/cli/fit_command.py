@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import sys
 import time
@@ -12,15 +13,16 @@ from pathlib import Path
 
 from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting import FitOptions, FitResult, fit_recordings
-from hframe_id.fitting.options import NOISE_METHODS, SOLVERS, UNCERTAINTY_METHODS
+from hframe_id.fitting.options import CONTINUITY, NOISE_METHODS, SOLVERS, UNCERTAINTY_METHODS
 from hframe_id.fitting.output import write_parameter_file
 from hframe_id.fitting.report import (
-    MODELS_DIR,
-    THESIS_REFERENCE,
     mismatch_rows,
     mismatch_statement,
     write_report,
 )
+from hframe_id.fitting.summary_json import fit_summary
+from hframe_id.models import VARIANTS, declaration
+from hframe_id.models.declaration import FIT_DEFAULT_KEYS
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import read_recording
 from hframe_id.recordings.recording import Recording
@@ -95,14 +97,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--initial",
         metavar="FILE",
-        help="initial parameter file (default: the thesis's set for the recordings' model: "
-        + ", ".join(f"{v}: models/{f}" for v, (f, _) in THESIS_REFERENCE.items())
+        help="initial parameter file (default: the model's reference set, for the thesis's "
+        "variants their table: "
+        + ", ".join(f"{v}: models/{declaration(v).reference_file.name}" for v in VARIANTS)
         + ")",
     )
     parser.add_argument(
         "--model",
-        choices=tuple(THESIS_REFERENCE),
-        help="model variant to fit (default: the recordings' rig variant); picks the default "
+        metavar="VARIANT",
+        help=f"model variant to fit ({', '.join(VARIANTS)} or one from --model-file; default: "
+        "the model of the --model-file, else the recordings' rig variant); picks the default "
         "initial file",
     )
     parser.add_argument(
@@ -168,9 +172,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--shooting-interval",
         type=int,
-        default=10,
         metavar="SAMPLES",
-        help="samples per shooting interval (a node every this many samples)",
+        help="samples per shooting interval (a node every this many samples; default: the "
+        "model's fit default, else 10)",
+    )
+    parser.add_argument(
+        "--continuity",
+        choices=CONTINUITY,
+        help="'exact': the intervals join into one simulated trajectory (output error); "
+        "'none': each interval starts from its own estimated state (prediction error on "
+        "horizons of --shooting-interval samples, for plants whose simulation drifts). "
+        "Default: the model's fit default, else 'exact'",
     )
     parser.add_argument(
         "--smoothing",
@@ -247,6 +259,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out-dir", default="fits", help="where the fit and report go")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object on stdout (success, fit id, files, every parameter with "
+        "unit, std and 95 %% interval; docs/fitting-json.md); the summary goes to stderr",
+    )
     parser.set_defaults(handler=run)
 
 
@@ -304,7 +322,11 @@ def _options(args: argparse.Namespace) -> FitOptions:
             name: _samples(value, f"--latency {name}")
             for name, value in _pairs(args.latency, "--latency").items()
         },
-        shooting_interval=args.shooting_interval,
+        **{
+            name: getattr(args, name)
+            for name in FIT_DEFAULT_KEYS
+            if getattr(args, name) is not None
+        },
         smoothing=smoothing,
         smoothing_schedule=tuple(
             _float(p, "--smoothing-schedule") for p in _names(args.smoothing_schedule)
@@ -321,14 +343,24 @@ def _options(args: argparse.Namespace) -> FitOptions:
     )
 
 
+def _with_model_defaults(options: FitOptions, args: argparse.Namespace, variant: str):
+    """The options with the model's fit defaults where the command line set nothing."""
+    declared = declaration(variant)
+    unset = {k: v for k, v in declared.fit_defaults if getattr(args, k) is None}
+    try:
+        return dataclasses.replace(options, **unset)
+    except OptionError as err:
+        raise OptionError(f"{declared.source}: fit default: {err}") from None
+
+
 def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path]:
     """The start of the fit and its file, which must be of the fitted ``variant``."""
     if args.initial:
         path = Path(args.initial)
-    elif variant in THESIS_REFERENCE:
-        path = MODELS_DIR / THESIS_REFERENCE[variant][0]
+    elif declaration(variant).reference_file is not None:
+        path = declaration(variant).reference_file
     else:
-        raise FitError(f"no default initial parameters for model {variant!r}; use --initial")
+        raise FitError(f"model {variant!r} declares no reference parameter file; use --initial")
     return load_parameter_file(path, variant=variant), path
 
 
@@ -357,17 +389,17 @@ def _cross_validate(
     return table
 
 
-def _print_mismatch(result: FitResult) -> None:
+def _print_mismatch(result: FitResult, stream) -> None:
     """The model-mismatch statement and its per-channel table, if the fit estimated noise."""
     statement = mismatch_statement(result)
     if statement is None:
         return
     rows = mismatch_rows(result)
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
-    print(f"model mismatch: {statement}")
+    print(f"model mismatch: {statement}", file=stream)
     for row in rows:
         cells = (cell.ljust(width) for cell, width in zip(row, widths, strict=True))
-        print("  ".join(cells).rstrip())
+        print("  ".join(cells).rstrip(), file=stream)
 
 
 def _write_outputs(
@@ -377,7 +409,7 @@ def _write_outputs(
     initial_path: Path,
     out_dir: Path,
     cross_validation: LeaveOneOutTable | None,
-) -> tuple[Path | None, Path]:
+) -> tuple[str, Path | None, Path]:
     """The parameter file (a successful fit only) and the report with its plots: all of them
     or, on any exception, none (nor ``out_dir`` if this created it)."""
     created = not out_dir.exists()
@@ -397,16 +429,17 @@ def _write_outputs(
         if created and not any(out_dir.iterdir()):
             out_dir.rmdir()
         raise
-    return parameter_file, report
+    return fit_id, parameter_file, report
 
 
 def run(args: argparse.Namespace) -> int:
     options = _options(args)
     out_dir = Path(args.out_dir)
     check_out_dir(out_dir)
-    if args.model:
+    model = args.model or (args.loaded_models[0] if len(args.loaded_models) == 1 else None)
+    if model:
         # A start of another variant fails before the recordings are read.
-        initial, initial_path = _initial(args, args.model)
+        initial, initial_path = _initial(args, model)
     paths = [resolve_dataset(name) for name in args.files]
     recordings = []
     with warnings.catch_warnings(record=True) as caught:
@@ -415,9 +448,10 @@ def run(args: argparse.Namespace) -> int:
             recordings.append(read_recording(path))
     for warning in caught:
         print(f"hframe-id: warning: {warning.message}", file=sys.stderr)
-    variant = args.model or recordings[0].variant
-    if not args.model:
+    variant = model or recordings[0].variant
+    if not model:
         initial, initial_path = _initial(args, variant)
+    options = _with_model_defaults(options, args, variant)
     if not args.quiet:
         total = sum(rec.n_samples for rec in recordings)
         print(
@@ -429,16 +463,19 @@ def run(args: argparse.Namespace) -> int:
     cross_validation = None
     if result.success and len(recordings) > 1 and not args.no_cross_validation:
         cross_validation = _cross_validate(recordings, initial, options, args.quiet)
-    parameter_file, report = _write_outputs(
+    fit_id, parameter_file, report = _write_outputs(
         result, recordings, paths, initial_path, out_dir, cross_validation
     )
-    print(result.summary())
+    human = sys.stderr if args.json else sys.stdout
+    print(result.summary(), file=human)
     if held := result.held_statement():
-        print(held)
-    _print_mismatch(result)
+        print(held, file=human)
+    _print_mismatch(result, human)
     if parameter_file:
-        print(f"parameter file: {parameter_file}")
-    print(f"report: {report}")
+        print(f"parameter file: {parameter_file}", file=human)
+    print(f"report: {report}", file=human)
+    if args.json:
+        print(json.dumps(fit_summary(result, fit_id, parameter_file, report), indent=2))
     if not result.success:
         print(
             f"hframe-id: fit failed: {result.message}; no parameter file written", file=sys.stderr

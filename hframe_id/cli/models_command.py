@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from hframe_id.models import VARIANTS, build_model, parameter_specs
+from hframe_id.models import build_model, declaration, parameter_specs, variants
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,6 +24,8 @@ def describe(variant: str) -> dict:
     return {
         "variant": variant,
         "description": model.description,
+        "declared_in": declaration(variant).source,
+        "reference": str(declaration(variant).reference_file or ""),
         "states": [s.label for s in model.states],
         "inputs": [s.label for s in model.inputs],
         "outputs": [s.label for s in model.outputs],
@@ -35,7 +37,7 @@ def describe(variant: str) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    described = [describe(v) for v in VARIANTS]
+    described = [describe(v) for v in variants()]
     if args.json:
         print(json.dumps(described, indent=2))
         return 0

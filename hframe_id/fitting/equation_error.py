@@ -131,13 +131,12 @@ def equation_error_start(
         key = theta.tobytes()
         if key not in cache:
             cache.clear()
-            p = p0.copy()
-            p[free] = p0[free] * np.exp(theta)
+            p = problem.parameters(theta)
             args[3][:] = p
             run()
             e = np.ascontiguousarray(outs[0].T) * mask  # (nq, n)
             jac = np.ascontiguousarray(outs[1].reshape(n, -1, nq).transpose(2, 0, 1))
-            jac = jac[:, :, free] * p[free] * mask[:, :, None]
+            jac = jac[:, :, free] * problem.parameter_slopes(p) * mask[:, :, None]
             cache[key] = (e, jac)
         e, jac = cache[key]
         return (e / scale[:, None]).ravel(), (jac / scale[:, None, None]).reshape(nq * n, -1)
@@ -151,7 +150,7 @@ def equation_error_start(
             # Robust spread (median absolute value): the residuals have heavy tails.
             scale[j] = max(1.4826 * float(np.median(used)) if used.size else 1.0, 1e-300)
         cache.clear()
-        theta = _robust_gauss_newton(residual, theta, problem.log_lower, problem.log_upper)
+        theta = _robust_gauss_newton(residual, theta, problem.theta_lower, problem.theta_upper)
     return theta
 
 

@@ -40,7 +40,6 @@ from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
 from hframe_id.fitting.options import (
     HELD_PRIOR_RELATIVE_STD,
-    VARIANT_FIXED,
     FitOptions,
     FitProgress,
 )
@@ -101,7 +100,8 @@ class ParameterEstimate:
 
     ``std_error`` and ``ci95`` come from the covariance chosen in the options (robust to
     correlated residuals by default); the interval is symmetric in log(p), so it is
-    [p / f, p * f] with f = exp(z * relative_std). Fixed parameters have zero error and
+    [p / f, p * f] with f = exp(z * relative_std), except for signed parameters (offsets),
+    fitted linearly, whose interval is p -/+ z std_error. Fixed parameters have zero error and
     ``free`` False; free parameters the data do not identify are held at their initial
     value, with ``identified`` False and the standard error they had when found out.
     """
@@ -346,7 +346,7 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
     options = problem.options
     names = problem.model.parameter_names
     if options.consider is None:
-        prior = {n: HELD_PRIOR_RELATIVE_STD for n in VARIANT_FIXED.get(problem.model.variant, ())}
+        prior = {n: HELD_PRIOR_RELATIVE_STD for n in problem.model.declaration.held if n in names}
         prior.update({n: HELD_PRIOR_RELATIVE_STD for n in result.not_identified})
     else:
         unknown = [n for n in options.consider if n not in names]
@@ -378,16 +378,13 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
     extra = {}
     for k, name in enumerate(result.free_names):
         est = result.estimates[name]
+        f = widened.free_names.index(name)
+        signed, scale = widened.signed[f], widened.signed_scale[f]
         variance = max(float(added[offset + k, offset + k]), 0.0)
-        rel = math.sqrt(est.relative_std**2 + variance)
-        factor = math.exp(min(z * rel, 700.0))
+        theta_std = est.std_error / scale if signed else est.relative_std
+        std, rel, ci95 = spread(est.estimate, math.sqrt(theta_std**2 + variance), signed, scale, z)
         extra[name] = math.sqrt(variance)
-        result.estimates[name] = replace(
-            est,
-            relative_std=rel,
-            std_error=est.estimate * rel,
-            ci95=(est.estimate / factor, est.estimate * factor),
-        )
+        result.estimates[name] = replace(est, relative_std=rel, std_error=std, ci95=ci95)
     result.diagnostics["consider"]["relative_std_added"] = extra
 
 
@@ -539,8 +536,8 @@ def _restarts_along_unmeasured_springs(
                 theta = state.theta.copy()
                 theta[index] = np.clip(
                     theta[index] + math.log(factor),
-                    problem.log_lower[index],
-                    problem.log_upper[index],
+                    problem.theta_lower[index],
+                    problem.theta_upper[index],
                 )
                 trial_stages: list[StageReport] = []
                 label = f"restart {tried + 1}, {problem.free_names[index]} x{factor:.3g}"
@@ -857,6 +854,21 @@ def _estimate_states(ms, nodes, velocity, theta, active, stages, progress):
     return state.nodes, merit
 
 
+def spread(
+    value: float, theta_std: float, signed: bool, scale: float, z: float
+) -> tuple[float, float, tuple[float, float]]:
+    """(std error [SI], relative std, interval) of a free parameter from the std of its theta.
+
+    Log-scale parameters: theta is a relative change, the interval symmetric in log(p),
+    [p / f, p f] with f = exp(z std). Signed ones: p = p0 + s theta, the interval p -/+ z s std.
+    """
+    if signed:
+        std = scale * theta_std
+        return std, std / abs(value) if value else math.inf, (value - z * std, value + z * std)
+    factor = math.exp(min(z * theta_std, 700.0))
+    return value * theta_std, theta_std, (value / factor, value * factor)
+
+
 def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
     options = problem.options
     final = stages[-1]
@@ -891,20 +903,20 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         bound = bool(
             state.active[f]
             and (
-                state.theta[f] <= problem.log_lower[f] + 1e-9
-                or state.theta[f] >= problem.log_upper[f] - 1e-9
+                state.theta[f] <= problem.theta_lower[f] + 1e-9
+                or state.theta[f] >= problem.theta_upper[f] - 1e-9
             )
         )
         if bound:
             at_bound.append(name)
-        factor = math.exp(min(z * rel, 700.0))
+        std, rel, ci95 = spread(value, rel, problem.signed[f], problem.signed_scale[f], z)
         estimates[name] = ParameterEstimate(
             name=name,
             unit=spec.unit,
             initial=initial_value,
             estimate=value,
-            std_error=value * rel,
-            ci95=(value / factor, value * factor),
+            std_error=std,
+            ci95=ci95,
             identified=identified,
             free=True,
             relative_std=rel,

@@ -6,7 +6,7 @@ handed to ``nlpsol`` as one NLP:
 
     min  1/2 sum r(z, theta)^2    s.t.  (x_end,i(z_i, theta) - z_{i+1} s) / s = 0  for linked
                                         windows i, i + 1 of one experiment,
-                                        log_lower <= theta <= log_upper
+                                        theta_lower <= theta <= theta_upper
 
 r are the noise-weighted output residuals of the valid samples, z_i = node_i / s the node
 states in units of the defect scale s (``MultipleShooting.defect_scale``: one noise std for
@@ -147,12 +147,16 @@ class _Transcription:
         self.variables = ca.vertcat(ca.vec(z), theta_active)
         scale = ms.defect_scale
         nodes = z * ca.repmat(ca.DM(scale), 1, w)
-        # p = p0 with the free entries p0_j exp(theta_j) (held ones at their given theta).
+        # p = p0 with the free entries p0_j exp(theta_j), or p0_j + s_j theta_j if signed
+        # (FitProblem.parameters; held ones at their given theta).
         free = list(problem.free)
         theta_all = ca.DM(np.where(active, 0.0, theta)) + ca.DM(np.eye(nf)[:, active]) @ (
             theta_active
         )
-        p_free = ca.DM(problem.p_initial[free]) * ca.exp(theta_all)
+        start, signed = ca.DM(problem.p_initial[free]), ca.DM(problem.signed.astype(float))
+        p_free = (1 - signed) * start * ca.exp(theta_all) + signed * (
+            start + ca.DM(problem.signed_scale) * theta_all
+        )
         select_free = np.zeros((len(problem.p_initial), nf))
         select_free[free, np.arange(nf)] = 1.0
         p_fixed = problem.p_initial.copy()
@@ -380,8 +384,8 @@ def solve_nlp(
         solver = nlp.nlpsol(settings)
         build_time += time.perf_counter() - built
         x0 = np.concatenate([(nodes / ms.defect_scale).ravel(), theta[active]])
-        lower = np.concatenate([np.full(nodes.size, -np.inf), problem.log_lower[active]])
-        upper = np.concatenate([np.full(nodes.size, np.inf), problem.log_upper[active]])
+        lower = np.concatenate([np.full(nodes.size, -np.inf), problem.theta_lower[active]])
+        upper = np.concatenate([np.full(nodes.size, np.inf), problem.theta_upper[active]])
         n_g = nlp.defects.shape[0]
         solution = solver(x0=x0, lbx=lower, ubx=upper, lbg=np.zeros(n_g), ubg=np.zeros(n_g))
         stats = solver.stats()

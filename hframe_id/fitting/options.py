@@ -15,18 +15,6 @@ from typing import Any
 
 from hframe_id.errors import OptionError
 
-#: Parameters held fixed by default: geometry and motor constants are measured (data sheet,
-#: calipers), not identified; g_1 = 1 fixes the scale between voltage and torque (K_t g / R),
-#: which output-error data cannot separate from the inertias otherwise. g_2 is free: it absorbs
-#: the difference between the two amplifiers (section 4.3).
-DEFAULT_FIXED = ("r", "K_t", "K_e", "R", "g_1", "l_l0", "l_r0", "l_b0")
-
-#: Further parameters held by default per variant, because the standard outputs do not
-#: identify them. one-axis: the idler pulley (phi3) is not measured; its inertia and friction
-#: act on the drive only through the belt and are collinear with the motor's and the cart's
-#: (collinearity indices 1e3-4e4, measured on the shipped 5 V + 10 V pulses): with them free
-#: the fit wanders along the valley and stalls (docs/fitting.md, "one-axis").
-VARIANT_FIXED = {"one-axis": ("J_2", "B_2", "tau_c2")}
 #: Prior relative std of a table value held in a fit (``FitOptions.consider``): the spread
 #: between the thesis's own tables and between rigs is 10-20 % (Tables 2.1/2.3, 4.1/4.2).
 HELD_PRIOR_RELATIVE_STD = 0.2
@@ -34,6 +22,7 @@ HELD_PRIOR_RELATIVE_STD = 0.2
 UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
 SOLVERS = ("gauss-newton", "ipopt")
+CONTINUITY = ("exact", "none")
 
 
 @dataclass(frozen=True)
@@ -64,11 +53,12 @@ class FitOptions:
     ----------
     free : parameter names or fnmatch patterns (``"k_*"``) to fit; ``None`` selects the
         variant's default: every stiffness, inertia, mass, viscous and Coulomb friction
-        parameter and g_2 (everything but ``DEFAULT_FIXED`` and the variant's
-        ``VARIANT_FIXED``: one-axis holds the unmeasured idler's J_2, B_2, tau_c2).
+        parameter and g_2 (everything but the declaration's ``fixed`` and ``held``; one-axis
+        holds the unmeasured idler's J_2, B_2, tau_c2).
     fix : names or patterns removed from the free set (applied after ``free``).
-    bounds : ``{name: (low, high)}`` in SI units for free parameters. Default: the initial
-        value divided and multiplied by ``bound_factor``.
+    bounds : ``{name: (low, high)}`` in SI units for free parameters (0 < low for the
+        log-scale ones). Default: the initial value divided and multiplied by
+        ``bound_factor``; for signed parameters p0 -/+ ``bound_factor`` |p0|.
     bound_factor : default bound factor (> 1): free parameters stay within [p0 / f, p0 * f].
     channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
         by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
@@ -81,7 +71,7 @@ class FitOptions:
         (docs/fitting.md, "Model mismatch").
     consider : ``{name: relative std}`` of held parameters whose uncertainty the intervals
         include (consider covariance, ``hframe_id.fitting.consider``). ``None`` (default):
-        the variant's ``VARIANT_FIXED`` table values and any parameter held for
+        the declaration's ``held`` table values and any parameter held for
         identifiability, each at ``HELD_PRIOR_RELATIVE_STD``; ``{}``: held values exact.
     solver : the solver of the all-window stages: ``"gauss-newton"`` (default: the condensed
         Gauss-Newton of ``hframe_id.fitting.solver``) or ``"ipopt"`` (CasADi ``nlpsol`` with
@@ -94,6 +84,13 @@ class FitOptions:
         ``"auto"`` (default): estimated if the sensor-weighted fit does not reach the noise
         level (model mismatch, as on every real rig), else the sensor's.
     shooting_interval : samples per shooting window (a node every this many samples).
+    continuity : ``"exact"`` (default): the windows of an experiment join into one simulated
+        trajectory (output error; the interval only shapes the path of the solver).
+        ``"none"``: every window starts from its own estimated state and is simulated over
+        ``shooting_interval`` samples only: a prediction-error fit on horizons of that
+        length. For plants whose open-loop simulation drifts (integrators under closed-loop
+        control, the EMPS axis): a short horizon limits the drift's bias, a long one the
+        noise's influence (docs/real-data.md).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
         the model's (1e-3 m/s, 1e-2 rad/s).
     smoothing_schedule : continuation: factors applied to ``smoothing`` in the stages on the
@@ -145,6 +142,7 @@ class FitOptions:
     latency_samples: Mapping[str, int] = field(default_factory=dict)
     consider: Mapping[str, float] | None = None
     shooting_interval: int = 10
+    continuity: str = "exact"
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
     first_stage: bool = True
@@ -183,11 +181,8 @@ class FitOptions:
             for v in (low, high):
                 if isinstance(v, bool) or not isinstance(v, int | float) or math.isnan(v):
                     raise OptionError(f"bounds[{name!r}] must be two numbers, got {pair!r}")
-            if not 0 < low < high:
-                raise OptionError(
-                    f"bounds[{name!r}] must satisfy 0 < low < high (parameters are fitted "
-                    f"in log scale), got {pair!r}"
-                )
+            if not low < high:
+                raise OptionError(f"bounds[{name!r}] must satisfy low < high, got {pair!r}")
         _positive("bound_factor", self.bound_factor)
         if self.bound_factor <= 1:
             raise OptionError(f"bound_factor must be > 1, got {self.bound_factor!r}")
@@ -256,6 +251,10 @@ class FitOptions:
                 _positive(f"consider[{name!r}]", value)
         if self.solver not in SOLVERS:
             raise OptionError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        if self.continuity not in CONTINUITY:
+            raise OptionError(
+                f"continuity must be one of {', '.join(CONTINUITY)}, got {self.continuity!r}"
+            )
         if self.noise not in NOISE_METHODS:
             raise OptionError(
                 f"noise must be one of {', '.join(NOISE_METHODS)}, got {self.noise!r}"
@@ -286,6 +285,7 @@ class FitOptions:
             "latency_samples": {k: int(v) for k, v in self.latency_samples.items()},
             "consider": "default" if self.consider is None else dict(self.consider),
             "shooting_interval_samples": int(self.shooting_interval),
+            "continuity": self.continuity,
             "smoothing": list(self.smoothing) if self.smoothing else "model default",
             "smoothing_schedule": list(self.smoothing_schedule),
             "first_stage": bool(self.first_stage),

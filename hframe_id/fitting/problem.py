@@ -21,11 +21,11 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.options import DEFAULT_FIXED, VARIANT_FIXED, FitOptions
+from hframe_id.fitting.options import FitOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-from hframe_id.recordings.sensors import SensorModel
+from hframe_id.recordings.sensors import ENCODER_OUTPUTS, LASER_OUTPUTS, SensorModel
 
 #: Rig metadata keys that identify a physical rig (or the sim plant); recordings fitted
 #: jointly must agree on every one of them that both carry.
@@ -68,8 +68,8 @@ class FitProblem:
     initial: ParameterSet
     p_initial: np.ndarray  # all parameters, model order, SI
     free: tuple[int, ...]  # indices of free parameters in model order
-    log_lower: np.ndarray  # bounds on theta = ln(p / p_initial), free parameters
-    log_upper: np.ndarray
+    theta_lower: np.ndarray  # bounds on theta (``parameters``), free parameters
+    theta_upper: np.ndarray
     experiments: tuple[Experiment, ...]
     channel_std: np.ndarray  # (n_y,) [SI]
     quantization: np.ndarray  # (n_y,) encoder step [rad] of quantized channels, else 0
@@ -85,11 +85,36 @@ class FitProblem:
     def output_names(self) -> tuple[str, ...]:
         return tuple(s.name for s in self.model.outputs)
 
+    @property
+    def signed(self) -> np.ndarray:
+        """(n_f,) True for free parameters of either sign (fitted linearly)."""
+        return np.array([self.model.parameters[i].signed for i in self.free], dtype=bool)
+
+    @property
+    def signed_scale(self) -> np.ndarray:
+        """(n_f,) scale s of the linear transform of signed parameters: |p_initial|, or 1 (SI)
+        for a start at 0 (unused for log-scale parameters)."""
+        start = np.abs(self.p_initial[list(self.free)])
+        return np.where(start > 0, start, 1.0)
+
     def parameters(self, theta: np.ndarray) -> np.ndarray:
-        """All parameters (SI, model order) for log-parameters theta of the free ones."""
+        """All parameters (SI, model order) for theta of the free ones.
+
+        theta = ln(p / p_initial) for positive parameters (relative changes), and
+        theta = (p - p_initial) / s for signed ones (``signed_scale``), so that theta is a
+        relative change for both near the start.
+        """
         p = self.p_initial.copy()
-        p[list(self.free)] = self.p_initial[list(self.free)] * np.exp(theta)
+        start = self.p_initial[list(self.free)]
+        p[list(self.free)] = np.where(
+            self.signed, start + self.signed_scale * theta, start * np.exp(theta)
+        )
         return p
+
+    def parameter_slopes(self, p: np.ndarray) -> np.ndarray:
+        """(n_f,) d p / d theta of the free parameters at all parameters ``p`` (SI, model
+        order): p itself for log scale, s for signed ones."""
+        return np.where(self.signed, self.signed_scale, p[list(self.free)])
 
 
 def _suggest(word: str, choices: Sequence[str]) -> str:
@@ -111,10 +136,10 @@ def _expand(patterns: Sequence[str], names: Sequence[str], what: str) -> list[st
 
 
 def default_free(model: Model) -> list[str]:
-    """Every stiffness, inertia, mass, friction parameter and g_2 (not ``DEFAULT_FIXED``,
-    nor the variant's ``VARIANT_FIXED``: one-axis holds the unmeasured idler pulley)."""
-    fixed = DEFAULT_FIXED + VARIANT_FIXED.get(model.variant, ())
-    return [name for name in model.parameter_names if name not in fixed]
+    """The declaration's default free set among the model's parameters: all but the measured
+    (``fixed``) and the ``held`` ones (one-axis holds the unmeasured idler pulley)."""
+    free = model.declaration.default_free()
+    return [name for name in model.parameter_names if name in free]
 
 
 def resolve_free(model: Model, options: FitOptions) -> list[str]:
@@ -153,9 +178,40 @@ def encoder_step(recording: Recording, output: str) -> float:
     return 2 * math.pi / float(counts)
 
 
+def data_noise_std(recording: Recording, output: str) -> float:
+    """Noise std of an output estimated from the data alone [SI]: the robust spread of its
+    second differences, sigma = 1.4826 MAD(d2 y) / sqrt(6) (white noise e gives d2 e a variance
+    of 6 sigma^2; a motion smooth over a few samples adds little to d2 y)."""
+    j = recording.output_names.index(output)
+    y = recording.outputs[:, j]
+    second = np.diff(y[recording.valid[:, j] & np.isfinite(y)], 2)
+    sigma = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6)
+    if not sigma > 0:
+        # Quantized or piecewise-constant data: the median difference is 0; use the rms.
+        sigma = float(np.sqrt(np.mean(second**2)) / math.sqrt(6)) if second.size else 0.0
+    if not sigma > 0:
+        raise FitError(
+            f"{recording.name()}: cannot estimate the noise of {output} from the data (it does "
+            f"not vary); give channel_std for {output}"
+        )
+    return sigma
+
+
 def default_channel_std(recording: Recording, output: str) -> float:
-    """Noise std of an output channel from the rig metadata [rad or m]."""
+    """Noise std of an output channel [SI]: the rig's declaration (``noise_std_<output>``: a
+    value, or "estimate": ``data_noise_std``), else the H-frame rig's sensors (encoder
+    quantization, laser noise) from its metadata."""
     rig = recording.rig
+    declared = recording.declared_noise_std(output)
+    if declared == "estimate":
+        return data_noise_std(recording, output)
+    if declared is not None:
+        return float(declared)
+    if output not in ENCODER_OUTPUTS + LASER_OUTPUTS:
+        raise FitError(
+            f"{recording.name()}: rig metadata declare no noise_std_{output}; give channel_std "
+            f"for {output}"
+        )
     if output.startswith("phi"):
         counts = rig.get("encoder_counts_per_rev")
         if counts is None:
@@ -268,20 +324,34 @@ def build_problem(
     lower, upper = [], []
     for name in free_names:
         value = p0[names.index(name)]
-        if not value > 0:
+        signed = model.parameters[names.index(name)].signed
+        if not signed and not value > 0:
             raise FitError(
                 f"free parameter {name} starts at {float(value)!r}; parameters are fitted in log "
                 f"scale, so a free one needs a start > 0 (give a small positive value)"
             )
-        low, high = options.bounds.get(
-            name, (value / options.bound_factor, value * options.bound_factor)
+        scale = abs(value) if value != 0 else 1.0
+        default = (
+            (value - options.bound_factor * scale, value + options.bound_factor * scale)
+            if signed
+            else (value / options.bound_factor, value * options.bound_factor)
         )
+        low, high = options.bounds.get(name, default)
+        if not signed and not low > 0:
+            raise FitError(
+                f"bounds for {name} [{low:g}, {high:g}]: a parameter fitted in log scale needs "
+                "0 < low"
+            )
         if not low <= value <= high:
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}] exclude its initial value {value:g}"
             )
-        lower.append(math.log(low / value))
-        upper.append(math.log(high / value))
+        if signed:
+            lower.append((low - value) / scale)
+            upper.append((high - value) / scale)
+        else:
+            lower.append(math.log(low / value))
+            upper.append(math.log(high / value))
     free = tuple(names.index(n) for n in free_names)
 
     outputs = [s.name for s in model.outputs]
@@ -325,8 +395,8 @@ def build_problem(
         initial=initial,
         p_initial=p0,
         free=free,
-        log_lower=np.array(lower),
-        log_upper=np.array(upper),
+        theta_lower=np.array(lower),
+        theta_upper=np.array(upper),
         experiments=experiments,
         channel_std=std,
         quantization=quantization,

@@ -24,30 +24,25 @@ import numpy as np
 from hframe_id.atomic import replace_atomically, staged_directory
 from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.problem import applied_inputs
-from hframe_id.models import build_model
+from hframe_id.models import build_model, declaration
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.recordings.recording import Recording
-from hframe_id.resources import models_dir
 from hframe_id.simulation.open_loop import simulate
 from hframe_id.validation.cross_validation import LeaveOneOutTable
 
-MODELS_DIR = models_dir()
-#: The thesis's parameter set each variant's fit is compared with.
-THESIS_REFERENCE = {
-    "hframe-8": ("hframe-8-table4.2.yaml", "Table 4.1 + 4.2"),
-    "one-axis": ("one-axis-table2.3.yaml", "Table 2.1 + 2.3"),
-    "hframe-20": ("hframe-20-table3.1.yaml", "Table 3.1"),
-}
 #: Display scale per output unit: angles in rad, positions in mm.
 _SCALE = {"rad": (1.0, "rad"), "m": (1e3, "mm")}
 _RESIDUAL_SCALE = {"rad": (1e6, "urad"), "m": (1e6, "um")}
 
 
-def thesis_reference(variant: str) -> tuple[ParameterSet | None, str]:
-    name, label = THESIS_REFERENCE[variant]
-    path = MODELS_DIR / name
-    return (load_parameter_file(path) if path.exists() else None), label
+def model_reference(variant: str) -> tuple[ParameterSet | None, str]:
+    """The declared reference set a fit of ``variant`` is compared with, and its source
+    (the thesis's table for its variants); (None, "") if the model declares none."""
+    declared = declaration(variant)
+    if declared.reference_file is None:
+        return None, ""
+    return load_parameter_file(declared.reference_file), declared.reference_label
 
 
 def common_truth(recordings: list[Recording]) -> ParameterSet | None:
@@ -165,10 +160,10 @@ def parameter_table(
 ) -> list[str]:
     header = (
         "parameter",
-        f"thesis ({label})",
+        f"reference ({label})",
         "fitted",
         "95 % interval",
-        "vs thesis",
+        "vs reference",
         "identified",
     )
     if truth:
@@ -248,7 +243,7 @@ def plot_experiment(
         ax.plot(t, scale * measured, "k.", ms=1.5, label="measured (valid)")
         ax.plot(t, scale * fitted[:, j], "C0", lw=1.2, label="fitted")
         if thesis is not None:
-            ax.plot(t, scale * thesis[:, j], "C3--", lw=1, label=f"thesis {label}")
+            ax.plot(t, scale * thesis[:, j], "C3--", lw=1, label=f"reference: {label}")
         ax.set_title(f"{name} [{unit}]")
         ax.grid(alpha=0.3)
         res = axes[1, j]
@@ -375,14 +370,14 @@ def _report_lines(
     plots: Path,
     folder: str,
 ) -> list[str]:
-    thesis, label = thesis_reference(result.variant)
+    thesis, label = model_reference(result.variant)
     truth, truth_label, truth_note = comparable_truth(recordings, result.variant)
     lines = [f"# Fit {fit_id}", "", *_status_lines(result, recordings, parameter_file)]
     statement = mismatch_statement(result)
     if statement:
         lines += ["## Model mismatch", "", statement, "", *markdown_table(mismatch_rows(result))]
         lines.append("")
-    intro = f"Fitted values against the thesis ({label})"
+    intro = f"Fitted values against the model's reference set ({label})"
     if truth:
         intro += f" {truth_note}"
     else:

@@ -105,8 +105,11 @@ class MultipleShooting:
             valid = exp.valid[k0 : k0 + n]
             self.measured[i, :n] = np.where(valid, exp.outputs[k0 : k0 + n], 0.0)
             self.weight[i, :n] = valid / problem.channel_std
-        # Windows i and i + 1 of the same experiment are joined by continuity.
-        self.linked = self.window_experiment[:-1] == self.window_experiment[1:]
+        # Windows i and i + 1 of the same experiment are joined by continuity (unless the
+        # options ask for independent horizons: ``FitOptions.continuity``).
+        self.linked = (self.window_experiment[:-1] == self.window_experiment[1:]) & (
+            problem.options.continuity == "exact"
+        )
         self.window_index_in_experiment = self.window_start // m
         self.first_window = np.array(
             [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]
@@ -488,12 +491,12 @@ class MultipleShooting:
             jac = sens_t * weight[..., None]
         else:
             jac = np.einsum("jx,wkxd->wkjd", self.c, sens_t) * weight[..., None]
-        p_free = p[list(self.problem.free)]
+        slopes = self.problem.parameter_slopes(p)  # d p / d theta
         end = out["end"][t]
         parts["jac_node"] = jac[..., :nx]
-        parts["jac_theta"] = jac[..., nx:] * p_free
+        parts["jac_theta"] = jac[..., nx:] * slopes
         parts["a_end"] = end[:, :, :nx]
-        parts["b_end"] = end[:, :, nx:] * p_free
+        parts["b_end"] = end[:, :, nx:] * slopes
         return parts
 
     def defects(self, ev: Evaluation, nodes: np.ndarray, links=None) -> np.ndarray:

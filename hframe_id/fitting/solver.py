@@ -445,7 +445,7 @@ class GaussNewton:
         self.node_damping = NODE_DAMPING
         self.set_smoothing(smoothing, proximal=True)
         self.links = ms.linked.copy()
-        lo, hi = self.problem.log_lower, self.problem.log_upper
+        lo, hi = self.problem.theta_lower, self.problem.theta_upper
         ms.frozen_substeps = None
         ev = self._evaluate(state, state.nodes, state.theta, smoothing)
         state.evaluation = ev

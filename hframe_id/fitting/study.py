@@ -23,13 +23,12 @@ from hframe_id.fitting.designs import standard_designs
 from hframe_id.fitting.fit import fit_recordings
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import default_free
-from hframe_id.models import build_model
+from hframe_id.models import build_model, declaration
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.resources import models_dir
 
 MODELS = models_dir()
-START_FILES = {"hframe-8": "hframe-8-table4.2.yaml", "one-axis": "one-axis-table2.3.yaml"}
 
 
 @dataclass
@@ -54,7 +53,7 @@ class Trial:
 
 
 def random_truth(variant: str, rng: np.random.Generator, spread: float) -> ParameterSet:
-    base = load_parameter_file(MODELS / START_FILES[variant], variant)
+    base = load_parameter_file(declaration(variant).reference_file, variant)
     model = build_model(variant)
     free = default_free(model)
     factors = {n: math.exp(rng.uniform(-math.log(spread), math.log(spread))) for n in free}
@@ -94,7 +93,7 @@ def run_trial(
     start = truth.replace_values(**start_values)
     if from_table:
         # What a user does: start from the thesis's table the plant was drawn around.
-        start = load_parameter_file(MODELS / START_FILES[variant], variant)
+        start = load_parameter_file(declaration(variant).reference_file, variant)
     result = fit_recordings(recordings, start, options)
     errors, covered, covered_gn, identified = {}, {}, {}, {}
     z = 1.959963984540054

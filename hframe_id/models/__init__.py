@@ -1,58 +1,57 @@
-"""Symbolic models of the one-axis drive and the H-frame, derived by Lagrange's equations."""
+"""Symbolic models of the one-axis drive and the H-frame, derived by Lagrange's equations.
+
+Every variant is a ``ModelDeclaration`` in one registry (``hframe_id.models.registry``): the
+thesis's three below, plug-ins of the entry-point group ``hframe_id.models``, and user model
+files (``load_model_file``, docs/custom-models.md).
+"""
 
 from __future__ import annotations
 
-import difflib
 from functools import lru_cache
-from types import ModuleType
 
-from hframe_id.errors import ModelError
 from hframe_id.models import hframe8, hframe20, one_axis
+from hframe_id.models.declaration import ModelDeclaration
+from hframe_id.models.lagrange import Friction, LagrangianSystem
 from hframe_id.models.model import Model, freeze
 from hframe_id.models.options import ModelOptions
+from hframe_id.models.registry import declaration, register, variants
 from hframe_id.models.spec import ParameterSpec, Signal
+from hframe_id.models.user import declare, load_model_file
 
-_VARIANTS: dict[str, ModuleType] = {m.NAME: m for m in (one_axis, hframe20, hframe8)}
-VARIANTS: tuple[str, ...] = tuple(_VARIANTS)
+#: The thesis's variants (built in; ``variants()`` also lists plug-ins and loaded model files).
+VARIANTS: tuple[str, ...] = tuple(
+    register(m.DECLARATION).name for m in (one_axis, hframe20, hframe8)
+)
 
 __all__ = [
     "VARIANTS",
+    "Friction",
+    "LagrangianSystem",
     "Model",
+    "ModelDeclaration",
     "ModelOptions",
     "ParameterSpec",
     "Signal",
     "build_model",
+    "declaration",
+    "declare",
+    "load_model_file",
     "parameter_specs",
+    "register",
+    "variants",
 ]
-
-
-def _variant_module(variant: str) -> ModuleType:
-    if variant not in _VARIANTS:
-        close = difflib.get_close_matches(str(variant), VARIANTS, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ModelError(f"unknown model variant {variant!r}{hint}; valid: {', '.join(VARIANTS)}")
-    return _VARIANTS[variant]
 
 
 def parameter_specs(variant: str) -> tuple[ParameterSpec, ...]:
     """Every parameter a file of this variant may hold (required and option-dependent)."""
-    return _variant_module(variant).PARAMETERS
+    return declaration(variant).parameters
 
 
 @lru_cache(maxsize=32)
+def _build(declared: ModelDeclaration, options: ModelOptions) -> Model:
+    return freeze(declared, options)
+
+
 def build_model(variant: str, options: ModelOptions | None = None) -> Model:
-    """Derive (once per variant and options) and return the symbolic model."""
-    module = _variant_module(variant)
-    options = options or ModelOptions()
-    used = tuple(
-        spec for spec in module.PARAMETERS if spec.required or options.position_dependent_stiffness
-    )
-    return freeze(
-        module.NAME,
-        module.DESCRIPTION,
-        options,
-        used,
-        module.INPUTS,
-        module.OUTPUTS,
-        module.lagrangian,
-    )
+    """Derive (once per declaration and options) and return the symbolic model."""
+    return _build(declaration(variant), options or ModelOptions())

@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 
 from hframe_id.models.spec import ParameterSpec, Signal
 
 RADIUS = ParameterSpec("r", "m", "pulley radius")
+#: Parameters every thesis variant holds in a fit by default: geometry and motor constants are
+#: measured (data sheet, calipers), not identified; g_1 = 1 fixes the scale between voltage and
+#: torque (K_t g / R), which output-error data cannot separate from the inertias otherwise. g_2
+#: is free: it absorbs the difference between the two amplifiers (section 4.3).
+MEASURED = ("r", "K_t", "K_e", "R", "g_1")
 MOTOR_CONSTANTS = (
     ParameterSpec("K_t", "N m/A", "motor torque constant (eq. 2.4)"),
     ParameterSpec("K_e", "V s/rad", "motor back-EMF constant (eq. 2.4)"),
@@ -45,3 +52,10 @@ HFRAME_INPUTS = (
 )
 #: Encoders (motor angles) and lasers (end-effector position), in this order.
 HFRAME_OUTPUTS = ("phi1", "phi2", "x", "y")
+
+
+def thesis_file(name: str) -> Path:
+    """A parameter file of the thesis shipped with hframe-id (models/), by file name."""
+    from hframe_id.resources import models_dir
+
+    return models_dir() / name

@@ -14,13 +14,16 @@ import casadi as ca
 from hframe_id.models.common import (
     HFRAME_INPUTS,
     HFRAME_OUTPUTS,
+    MEASURED,
     MOTOR_CONSTANTS,
     RADIUS,
     amplifier_gain,
     length_scaled_stiffness,
     motor_torque,
     spring_energy,
+    thesis_file,
 )
+from hframe_id.models.declaration import ModelDeclaration
 from hframe_id.models.lagrange import Friction, LagrangianSystem
 from hframe_id.models.options import ModelOptions
 from hframe_id.models.spec import ParameterSpec, Signal
@@ -114,3 +117,21 @@ def lagrangian(p: dict[str, ca.SX], u: ca.SX, options: ModelOptions) -> Lagrangi
         *(Friction(f"phi{i}", f"B_{i}", f"tau_c{i}") for i in PULLEYS),
     )
     return LagrangianSystem(COORDINATES, q, qdot, kinetic, potential, actuation, frictions)
+
+
+DECLARATION = ModelDeclaration(
+    name=NAME,
+    description=DESCRIPTION,
+    parameters=PARAMETERS,
+    coordinates=COORDINATES,
+    inputs=INPUTS,
+    outputs=OUTPUTS,
+    lagrangian=lagrangian,
+    reference_file=thesis_file("hframe-20-table3.1.yaml"),
+    reference_label="Table 3.1",
+    fixed=MEASURED
+    + tuple(
+        f"l_{i}" for i in (3, 4, 5, 6, 7, 8)
+    ),  # belt lengths are measured geometry (section 4.6)
+    source=__name__,
+)

@@ -13,13 +13,16 @@ import casadi as ca
 from hframe_id.models.common import (
     HFRAME_INPUTS,
     HFRAME_OUTPUTS,
+    MEASURED,
     MOTOR_CONSTANTS,
     RADIUS,
     amplifier_gain,
     length_scaled_stiffness,
     motor_torque,
     spring_energy,
+    thesis_file,
 )
+from hframe_id.models.declaration import ModelDeclaration
 from hframe_id.models.lagrange import Friction, LagrangianSystem
 from hframe_id.models.options import ModelOptions
 from hframe_id.models.spec import ParameterSpec, Signal
@@ -110,3 +113,18 @@ def lagrangian(p: dict[str, ca.SX], u: ca.SX, options: ModelOptions) -> Lagrangi
         Friction("phi2", "B_M2", "tau_cM2"),
     )
     return LagrangianSystem(COORDINATES, q, qdot, kinetic, potential, actuation, frictions)
+
+
+DECLARATION = ModelDeclaration(
+    name=NAME,
+    description=DESCRIPTION,
+    parameters=PARAMETERS,
+    coordinates=COORDINATES,
+    inputs=INPUTS,
+    outputs=OUTPUTS,
+    lagrangian=lagrangian,
+    reference_file=thesis_file("hframe-8-table4.2.yaml"),
+    reference_label="Table 4.1 + 4.2",
+    fixed=MEASURED + ("l_l0", "l_r0", "l_b0"),  # belt lengths are measured geometry (section 4.6)
+    source=__name__,
+)

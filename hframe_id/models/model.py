@@ -9,7 +9,8 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import ModelError
-from hframe_id.models.lagrange import LagrangianSystem, accelerations, mass_matrix
+from hframe_id.models.declaration import ModelDeclaration, check_system
+from hframe_id.models.lagrange import Friction, LagrangianSystem, accelerations, mass_matrix
 from hframe_id.models.options import ModelOptions
 from hframe_id.models.spec import ParameterSpec, Signal
 
@@ -27,6 +28,11 @@ class Model:
     f : ``ca.Function`` (x, u, p) -> xdot with s fixed at ``options.smoothing``.
     output : ``ca.Function`` (x) -> y, the measured outputs.
     energy : ``ca.Function`` (x, p) -> (T [J], V [J]).
+    mass : ``ca.Function`` (p) -> M, the mass matrix d^2 T / dqdot^2 (constant in q here).
+    actuation : ``ca.Function`` (x, u, p) -> Q_act, the generalized forces other than friction
+        and the springs (motor torques) [N or N m].
+    frictions : the friction-bearing coordinates and their parameters.
+    declaration : the declaration the model was derived from.
     """
 
     variant: str
@@ -42,6 +48,9 @@ class Model:
     output: ca.Function
     energy: ca.Function
     mass: ca.Function
+    actuation: ca.Function
+    frictions: tuple[Friction, ...]
+    declaration: ModelDeclaration
 
     @property
     def n_states(self) -> int:
@@ -77,25 +86,27 @@ class Model:
         return names.index(name)
 
 
-def freeze(
-    variant: str,
-    description: str,
-    options: ModelOptions,
-    parameters: tuple[ParameterSpec, ...],
-    inputs: tuple[Signal, ...],
-    output_names: tuple[str, ...],
-    build_lagrangian,
-) -> Model:
-    """Derive the equations of motion of a variant and wrap them as named CasADi functions."""
+def freeze(declaration: ModelDeclaration, options: ModelOptions) -> Model:
+    """Derive the equations of motion of a declared variant and wrap them as named functions.
+
+    Only the parameters the options use are part of p (belt lengths only with
+    position-dependent stiffness).
+    """
+    parameters = tuple(
+        spec
+        for spec in declaration.parameters
+        if spec.required or options.position_dependent_stiffness
+    )
     p_sym = {spec.name: ca.SX.sym(spec.name) for spec in parameters}
     p = ca.vertcat(*p_sym.values())
-    u = ca.SX.sym("u", len(inputs))
+    u = ca.SX.sym("u", len(declaration.inputs))
     s = ca.SX.sym("s", 2)
-    system: LagrangianSystem = build_lagrangian(p_sym, u, options)
+    system: LagrangianSystem = declaration.lagrangian(p_sym, u, options)
+    check_system(declaration, system, [p, u])
     x = ca.vertcat(system.q, system.qdot)
     xdot = ca.vertcat(system.qdot, accelerations(system, p_sym, s))
     coordinate_names = [c.name for c in system.coordinates]
-    y = ca.vertcat(*(system.q[coordinate_names.index(name)] for name in output_names))
+    y = ca.vertcat(*(system.q[coordinate_names.index(name)] for name in declaration.outputs))
 
     dynamics = ca.Function("dynamics", [x, u, p, s], [xdot], ["x", "u", "p", "s"], ["xdot"])
     f = ca.Function(
@@ -106,13 +117,13 @@ def freeze(
         Signal(f"{c.name}_dot", rate_units[c.unit], f"rate of {c.description}")
         for c in system.coordinates
     )
-    outputs = tuple(system.coordinates[coordinate_names.index(n)] for n in output_names)
+    outputs = tuple(system.coordinates[coordinate_names.index(n)] for n in declaration.outputs)
     return Model(
-        variant=variant,
-        description=description,
+        variant=declaration.name,
+        description=declaration.description,
         options=options,
         states=states,
-        inputs=inputs,
+        inputs=declaration.inputs,
         outputs=outputs,
         parameters=parameters,
         coordinates=system.coordinates,
@@ -127,4 +138,9 @@ def freeze(
             ["T", "V"],
         ),
         mass=ca.Function("mass", [p], [mass_matrix(system)], ["p"], ["M"]),
+        actuation=ca.Function(
+            "actuation", [x, u, p], [system.actuation], ["x", "u", "p"], ["Q_act"]
+        ),
+        frictions=system.frictions,
+        declaration=declaration,
     )

@@ -5,7 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-ParameterKind = Literal["positive", "nonnegative"]
+from hframe_id.errors import ModelError
+
+ParameterKind = Literal["positive", "nonnegative", "real"]
+PARAMETER_KINDS = ("positive", "nonnegative", "real")
 
 
 @dataclass(frozen=True)
@@ -27,9 +30,11 @@ class ParameterSpec:
     """One physical parameter of a model variant.
 
     ``kind`` says which values are physical: ``"positive"`` (masses, stiffnesses, viscous
-    friction, motor constants) or ``"nonnegative"`` (Coulomb friction, which is zero in the
-    thesis's linear models). ``required=False`` marks parameters that only some model options
-    use (belt lengths for position-dependent stiffness, section 4.6).
+    friction, motor constants), ``"nonnegative"`` (Coulomb friction, which is zero in the
+    thesis's linear models) or ``"real"`` (either sign: offsets, biases). A fit estimates
+    positive and nonnegative parameters in log scale, real ones linearly. ``required=False``
+    marks parameters that only some model options use (belt lengths for position-dependent
+    stiffness, section 4.6).
     """
 
     name: str
@@ -38,12 +43,19 @@ class ParameterSpec:
     kind: ParameterKind = "positive"
     required: bool = True
 
+    def __post_init__(self) -> None:
+        if self.kind not in PARAMETER_KINDS:
+            raise ModelError(
+                f"parameter {self.name!r}: kind {self.kind!r} is not one of "
+                f"{', '.join(PARAMETER_KINDS)}"
+            )
+
     @property
     def key(self) -> str:
         """The key used in parameter files: name with unit, e.g. ``"k_l [N/m]"``."""
         return f"{self.name} [{self.unit}]"
 
     @property
-    def is_coulomb(self) -> bool:
-        """True for Coulomb friction levels (which linearization excludes)."""
-        return self.kind == "nonnegative"
+    def signed(self) -> bool:
+        """True if the parameter may take either sign (fitted linearly, not in log scale)."""
+        return self.kind == "real"

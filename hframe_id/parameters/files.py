@@ -4,6 +4,7 @@ Format (YAML, format_version 1.x)::
 
     format_version: "1.0"
     model: hframe-8                      # model variant
+    model_file: ../models/my_axis.py     # optional: a user model's file, relative to this one
     title: H-frame 8th-order model, linear
     source: Sollmann 2007, Table 4.1     # where the values come from
     references: [...]                    # optional, list of strings
@@ -35,13 +36,13 @@ import yaml
 
 from hframe_id.atomic import replace_atomically
 from hframe_id.errors import ModelError, ParameterFileError
-from hframe_id.models import VARIANTS, parameter_specs
+from hframe_id.models import declaration, load_model_file, parameter_specs, variants
 
 FORMAT_VERSION = "1.0"
 SUPPORTED_MAJOR = 1
 
 _REQUIRED_HEADER = ("format_version", "model", "title", "source", "parameters")
-_OPTIONAL_HEADER = ("references", "notes", "provenance", "uncertainty")
+_OPTIONAL_HEADER = ("model_file", "references", "notes", "provenance", "uncertainty")
 
 
 @dataclass
@@ -184,10 +185,13 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     check_header(doc, _REQUIRED_HEADER, _OPTIONAL_HEADER, where)
     _check_format_version(doc["format_version"], where)
     model = doc["model"]
-    if model not in VARIANTS:
+    if model not in variants() and "model_file" in doc:
+        load_model_file(path.parent / str(doc["model_file"]))
+    known = variants()
+    if model not in known:
         raise ParameterFileError(
-            f"{where}: model {model!r} is not a variant{suggest(str(model), list(VARIANTS))};"
-            f" valid: {', '.join(VARIANTS)}"
+            f"{where}: model {model!r} is not a variant{suggest(str(model), list(known))};"
+            f" valid: {', '.join(known)} (a model of your own: --model-file FILE.py)"
         )
     if variant is not None and model != variant:
         raise ParameterFileError(f"{where}: model is {model!r}, but {variant!r} is needed here")
@@ -246,6 +250,12 @@ def save_parameter_file(
     path = Path(path)
     if path.exists() and not overwrite:
         raise ParameterFileError(f"{path}: exists already; refusing to overwrite it")
-    text = yaml.safe_dump(to_document(params), sort_keys=False, allow_unicode=True, width=100)
+    doc = to_document(params)
+    model_file = declaration(params.variant).model_file
+    if model_file is not None:
+        # A user model's file, relative to the parameter file, so that readers find the model.
+        relative = os.path.relpath(model_file, path.resolve().parent)
+        doc = {**dict(list(doc.items())[:2]), "model_file": relative, **doc}
+    text = yaml.safe_dump(doc, sort_keys=False, allow_unicode=True, width=100)
     path.parent.mkdir(parents=True, exist_ok=True)
     return replace_atomically(path, text)

@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import OptionError
-from hframe_id.models import Model, hframe8, hframe20, one_axis
+from hframe_id.models import Model
 from hframe_id.simulation.integrators import stable_substeps
 
 FRICTION_MODELS = ("smooth", "stick-slip")
@@ -44,9 +44,6 @@ STICK_BAND_ANGULAR_RAD_PER_S = 0.01
 #: same belt speed on a linear axis is 0.01 rad/s x r = 1.94e-4 m/s at r = 19.4 mm; this default
 #: is an assumption, not a thesis value.
 STICK_BAND_LINEAR_M_PER_S = 0.01 * 0.0194
-
-_VARIANT_MODULES = {m.NAME: m for m in (one_axis, hframe20, hframe8)}
-
 
 @dataclass(frozen=True)
 class FrictionOptions:
@@ -93,20 +90,17 @@ class FrictionSite:
 
 @lru_cache(maxsize=32)
 def friction_sites(model: Model) -> tuple[FrictionSite, ...]:
-    """Where friction acts in ``model`` (from the variant's Lagrangian description)."""
-    module = _VARIANT_MODULES[model.variant]
-    symbols = {name: ca.SX.sym(name) for name in model.parameter_names}
-    system = module.lagrangian(symbols, ca.SX.sym("u", model.n_inputs), model.options)
-    names = [c.name for c in system.coordinates]
+    """Where friction acts in ``model`` (from its declaration's friction-bearing coordinates)."""
+    names = [c.name for c in model.coordinates]
     parameters = list(model.parameter_names)
     return tuple(
         FrictionSite(
             names.index(f.coordinate),
             parameters.index(f.viscous),
             parameters.index(f.coulomb),
-            system.coordinates[names.index(f.coordinate)].unit == "m",
+            model.coordinates[names.index(f.coordinate)].unit == "m",
         )
-        for f in system.frictions
+        for f in model.frictions
     )
 
 

@@ -25,7 +25,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hframe_id.models import Model, hframe8, hframe20, one_axis
+from hframe_id.models import Model
 from hframe_id.simulation.compiled import evaluate
 from hframe_id.simulation.friction import friction_sites, stick_slip_force, stick_slip_substeps
 from hframe_id.simulation.integrators import rk4_function
@@ -40,9 +40,6 @@ CONSTANTS = (
     "current_limit [A]",
     "stick_time_constant [s]",
 )
-
-_VARIANT_MODULES = {m.NAME: m for m in (one_axis, hframe20, hframe8)}
-
 
 @dataclass(frozen=True)
 class PlantConstants:
@@ -83,11 +80,10 @@ class PlantConstants:
 @lru_cache(maxsize=32)
 def motor_sites(model: Model) -> tuple[tuple[int, int], ...]:
     """Per input: (index in q of the coordinate its motor drives, index in p of its gain g)."""
-    module = _VARIANT_MODULES[model.variant]
-    symbols = {name: ca.SX.sym(name) for name in model.parameter_names}
+    x = ca.SX.sym("x", model.n_states)
     u = ca.SX.sym("u", model.n_inputs)
-    system = module.lagrangian(symbols, u, model.options)
-    rows, columns = ca.jacobian(system.actuation, u).sparsity().get_triplet()
+    p = ca.SX.sym("p", len(model.parameters))
+    rows, columns = ca.jacobian(model.actuation(x, u, p), u).sparsity().get_triplet()
     names = list(model.parameter_names)
     return tuple((rows[columns.index(i)], names.index(f"g_{i + 1}")) for i in range(model.n_inputs))
 

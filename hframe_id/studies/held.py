@@ -15,8 +15,8 @@ import sys
 import numpy as np
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.options import VARIANT_FIXED
-from hframe_id.fitting.study import MODELS, START_FILES, random_truth, simulate_set
+from hframe_id.fitting.study import random_truth, simulate_set
+from hframe_id.models import declaration
 from hframe_id.parameters import load_parameter_file
 
 #: Truth spread of the other parameters around Table 2.3 (x/÷), as the recovery study's
@@ -31,10 +31,10 @@ def run_trial(seed: int, consider: dict | None = None) -> tuple[bool, dict[str, 
     truth = random_truth("one-axis", rng, TRUTH_SPREAD)
     idler = {
         n: truth.values[n] * (1 + rng.choice((-1, 1)) * rng.uniform(*IDLER_OFFSET))
-        for n in VARIANT_FIXED["one-axis"]
+        for n in declaration("one-axis").held
     }
     truth = truth.replace_values(**idler)
-    table = load_parameter_file(MODELS / START_FILES["one-axis"], "one-axis")
+    table = load_parameter_file(declaration("one-axis").reference_file, "one-axis")
     result = fit_recordings(simulate_set(truth, seed), table, FitOptions(consider=consider))
     covered = {
         n: e.ci95[0] <= truth.values[n] <= e.ci95[1]

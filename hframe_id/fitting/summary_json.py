@@ -1,0 +1,67 @@
+"""The machine-readable summary of a fit (``hframe-id fit --json``; docs/fitting-json.md).
+
+One JSON object, the same shape for every model::
+
+    {"success": true, "message": "...", "model": "emps-axis", "fit_id": "...",
+     "parameter_file": "fits/....yaml" or null, "report": "fits/...-report.md",
+     "parameters": {"M": {"value": 95.1, "unit": "kg", "std": 0.8,
+                          "interval_95": [93.5, 96.7], "free": true, "identified": true,
+                          "initial": 95.1089}, ...},
+     "channels": {"qm": {"unit": "m", "residual_rms": 1.7e-06, "noise_std": 1.7e-06}},
+     "held": "..." or null}
+
+Values are SI, in the parameter's ``unit``. Parameters that were not free have ``std`` and
+``interval_95`` null; numbers that are not finite (an interval the data do not bound) are null.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from hframe_id.fitting.fit import FitResult
+
+
+def _number(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def fit_summary(
+    result: FitResult, fit_id: str, parameter_file: Path | None, report: Path
+) -> dict[str, Any]:
+    """The ``--json`` object of a fit (see the module docstring)."""
+    parameters = {}
+    for name, est in result.estimates.items():
+        parameters[name] = {
+            "value": _number(est.estimate),
+            "unit": est.unit,
+            "std": _number(est.std_error) if est.free else None,
+            "interval_95": [_number(v) for v in est.ci95] if est.free else None,
+            "free": bool(est.free),
+            "identified": bool(est.identified),
+            "initial": _number(est.initial),
+        }
+    units = {s.name: s.unit for s in result.problem.model.outputs} if result.problem else {}
+    rms = result.diagnostics.get("channel_rms", {})
+    std = result.diagnostics.get("channel_std", {})
+    channels = {
+        name: {
+            "unit": units.get(name, ""),
+            "residual_rms": _number(rms[name]),
+            "noise_std": _number(std[name]) if name in std else None,
+        }
+        for name in rms
+    }
+    return {
+        "success": bool(result.success),
+        "message": result.message,
+        "model": result.variant,
+        "fit_id": fit_id,
+        "parameter_file": str(parameter_file) if parameter_file else None,
+        "report": str(report),
+        "parameters": parameters,
+        "channels": channels,
+        "held": result.held_statement(),
+    }

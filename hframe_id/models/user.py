@@ -1,0 +1,223 @@
+"""Models declared by their energies, without touching the package (docs/custom-models.md).
+
+A model file is a Python file that sets ``MODEL = declare(...)``::
+
+    def equations(q, qdot, u, p):
+        return {
+            "kinetic": 0.5 * p["M"] * qdot["q"] ** 2,
+            "potential": 0,
+            "forces": {"q": p["k_f"] * u["v"]},
+            "friction": {"q": ("F_v", "F_c")},
+        }
+
+``q``, ``qdot``, ``u`` and ``p`` map the declared names to CasADi symbols; a name that was not
+declared is an error naming the file and the name. Lagrange's equations are then derived the
+same way as for the thesis's variants (``hframe_id.models.lagrange``).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from hframe_id.errors import ModelError
+from hframe_id.models.declaration import ModelDeclaration
+from hframe_id.models.lagrange import Friction, LagrangianSystem
+from hframe_id.models.options import ModelOptions
+from hframe_id.models.spec import ParameterSpec, Signal
+
+#: What ``equations`` must return: the two energies, and optionally the generalized forces
+#: other than friction (inputs, offsets) and the friction-bearing coordinates.
+REQUIRED_KEYS = ("kinetic", "potential")
+OPTIONAL_KEYS = ("forces", "friction")
+
+Equations = Callable[..., Mapping[str, Any]]
+
+
+class _Declared(Mapping[str, ca.SX]):
+    """Symbols by declared name; looking up an undeclared name is a ``ModelError``."""
+
+    def __init__(self, what: str, symbols: dict[str, ca.SX], where: str) -> None:
+        self._what, self._symbols, self._where = what, symbols, where
+
+    def __getitem__(self, name: str) -> ca.SX:
+        if name not in self._symbols:
+            raise ModelError(
+                f"{self._where}: uses undeclared {self._what} {name!r}; declared: "
+                f"{', '.join(self._symbols) or 'none'}"
+            )
+        return self._symbols[name]
+
+    def __iter__(self):
+        return iter(self._symbols)
+
+    def __len__(self) -> int:
+        return len(self._symbols)
+
+
+def _expression(value: Any, what: str, where: str) -> ca.SX:
+    if isinstance(value, ca.SX):
+        return value
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return ca.SX(float(value))
+    raise ModelError(f"{where}: {what} must be an expression or a number, got {value!r}")
+
+
+def _lagrangian(
+    where: str,
+    coordinates: tuple[Signal, ...],
+    inputs: tuple[Signal, ...],
+    equations: Equations,
+) -> Callable[[dict[str, ca.SX], ca.SX, ModelOptions], LagrangianSystem]:
+    """A Lagrangian builder from a user's ``equations(q, qdot, u, p)``."""
+    names = [c.name for c in coordinates]
+
+    def build(p: dict[str, ca.SX], u: ca.SX, options: ModelOptions) -> LagrangianSystem:
+        q = ca.SX.sym("q", len(names))
+        qdot = ca.SX.sym("qdot", len(names))
+        result = equations(
+            _Declared("coordinate", {n: q[i] for i, n in enumerate(names)}, where),
+            _Declared("rate", {n: qdot[i] for i, n in enumerate(names)}, where),
+            _Declared("input", {s.name: u[i] for i, s in enumerate(inputs)}, where),
+            _Declared("parameter", dict(p), where),
+        )
+        if not isinstance(result, Mapping):
+            raise ModelError(f"{where}: equations must return a dict, got {type(result).__name__}")
+        for key in REQUIRED_KEYS:
+            if key not in result:
+                raise ModelError(
+                    f"{where}: equations return no {key!r} energy (write {key}=0 if it is zero)"
+                )
+        unknown = [k for k in result if k not in REQUIRED_KEYS + OPTIONAL_KEYS]
+        if unknown:
+            raise ModelError(
+                f"{where}: equations return unknown key(s) {', '.join(map(repr, unknown))}; "
+                f"valid: {', '.join(REQUIRED_KEYS + OPTIONAL_KEYS)}"
+            )
+        forces = [ca.SX(0)] * len(names)
+        for name, force in dict(result.get("forces") or {}).items():
+            if name not in names:
+                raise ModelError(f"{where}: force on undeclared coordinate {name!r}")
+            forces[names.index(name)] = _expression(force, f"force on {name!r}", where)
+        frictions = []
+        for name, pair in dict(result.get("friction") or {}).items():
+            if not (isinstance(pair, Sequence) and len(pair) == 2):
+                raise ModelError(
+                    f"{where}: friction on {name!r} must be (viscous, coulomb) parameter names, "
+                    f"got {pair!r}"
+                )
+            frictions.append(Friction(name, str(pair[0]), str(pair[1])))
+        return LagrangianSystem(
+            coordinates,
+            q,
+            qdot,
+            _expression(result["kinetic"], "kinetic energy", where),
+            _expression(result["potential"], "potential energy", where),
+            ca.vertcat(*forces),
+            tuple(frictions),
+        )
+
+    return build
+
+
+def _caller_file() -> Path | None:
+    """The file of the code that called ``declare`` (its model file or plug-in module)."""
+    file = sys._getframe(2).f_globals.get("__file__")
+    return Path(file).resolve() if file else None
+
+
+def declare(
+    name: str,
+    description: str,
+    coordinates: Sequence[Signal],
+    inputs: Sequence[Signal],
+    outputs: Sequence[str],
+    parameters: Sequence[ParameterSpec],
+    equations: Equations,
+    reference: str | Path | None = None,
+    reference_label: str = "",
+    fixed: Sequence[str] = (),
+    held: Sequence[str] = (),
+    fit_defaults: Mapping[str, Any] | None = None,
+) -> ModelDeclaration:
+    """Declare a model by its energies (see the module docstring).
+
+    ``reference`` is the model's reference parameter file, relative to the file that calls
+    ``declare``; ``fixed`` and ``held`` are held in fits by default (measured constants, and
+    values the outputs do not determine); ``fit_defaults`` (``shooting_interval``,
+    ``continuity``) are how ``hframe-id fit`` transcribes the model's data by default.
+    """
+    caller = _caller_file()
+    if reference is not None and not Path(reference).is_absolute():
+        reference = (caller.parent if caller else Path.cwd()) / reference
+    coordinates, inputs = tuple(coordinates), tuple(inputs)
+    return ModelDeclaration(
+        name=name,
+        description=description,
+        parameters=tuple(parameters),
+        coordinates=coordinates,
+        inputs=inputs,
+        outputs=tuple(outputs),
+        lagrangian=_lagrangian(f"model {name!r}", coordinates, inputs, equations),
+        reference_file=Path(reference) if reference is not None else None,
+        reference_label=reference_label,
+        fixed=tuple(fixed),
+        held=tuple(held),
+        fit_defaults=tuple(dict(fit_defaults or {}).items()),
+        source=str(caller) if caller else "<declare>",
+    )
+
+
+def _one_line(err: BaseException, path: Path) -> str:
+    """The error with the line of the model file it happened on."""
+    frames = [f for f in traceback.extract_tb(err.__traceback__) if Path(f.filename) == path]
+    line = f" (line {frames[-1].lineno})" if frames else ""
+    if isinstance(err, SyntaxError):
+        line = f" (line {err.lineno})"
+    return f"{type(err).__name__}{line}: {err}".splitlines()[0]
+
+
+def load_model_file(path: str | Path) -> ModelDeclaration:
+    """Load a model file, check it by deriving its equations, and register its declaration.
+
+    Every problem is a one-line ``ModelError`` naming the file and the item.
+    """
+    from hframe_id.models.model import freeze
+    from hframe_id.models.registry import register
+
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise ModelError(f"model file {path} does not exist")
+    if path.suffix != ".py":
+        raise ModelError(f"model file {path}: expected a Python file (.py), got {path.suffix!r}")
+    module_name = f"hframe_id_model_file_{abs(hash(str(path)))}"
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except ModelError as err:
+        message = str(err)
+        raise ModelError(message if str(path) in message else f"{path}: {message}") from None
+    except Exception as err:
+        raise ModelError(f"model file {path}: {_one_line(err, path)}") from None
+    declared = getattr(module, "MODEL", None)
+    if not isinstance(declared, ModelDeclaration):
+        raise ModelError(
+            f"model file {path}: defines no MODEL = declare(...) (found {type(declared).__name__})"
+        )
+    declared = replace(declared, source=str(path), model_file=path)
+    try:
+        freeze(declared, ModelOptions())
+    except ModelError as err:
+        message = str(err)
+        raise ModelError(message if str(path) in message else f"{path}: {message}") from None
+    except Exception as err:
+        raise ModelError(f"model file {path}: deriving the equations failed: {err}") from None
+    return register(declared)
