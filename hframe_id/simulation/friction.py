@@ -45,6 +45,7 @@ STICK_BAND_ANGULAR_RAD_PER_S = 0.01
 #: is an assumption, not a thesis value.
 STICK_BAND_LINEAR_M_PER_S = 0.01 * 0.0194
 
+
 @dataclass(frozen=True)
 class FrictionOptions:
     """Which friction law the simulator uses.

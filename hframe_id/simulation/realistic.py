@@ -41,6 +41,7 @@ CONSTANTS = (
     "stick_time_constant [s]",
 )
 
+
 @dataclass(frozen=True)
 class PlantConstants:
     """Friction-law and amplifier constants of a realistic plant (SI).
