@@ -185,6 +185,26 @@ def test_leave_one_out_on_small_simulated_recordings():
     # noise-level data from the true model: every fold lands within 0.1 % of the truth
     assert spread["k_l"].mean == pytest.approx(TABLE.values["k_l"], rel=1e-3)
     assert spread["b_cart"].relative_std_percent < 0.1
+    # delete-one jackknife: (n - 1) / sqrt(n) times the folds' sample std, n = 3 folds
+    values = [f.parameters["k_l"] for f in table.folds]
+    assert spread["k_l"].jackknife_std == pytest.approx(2 / 3**0.5 * np.std(values, ddof=1))
     assert "| r1.mcap | converged |" in table.markdown()
     with pytest.raises(FitError, match="at least two"):
         leave_one_out(recs[:1], start)
+
+
+def test_the_report_says_when_parameters_move_more_than_their_intervals():
+    from types import SimpleNamespace
+
+    from hframe_id.fitting.report import _jackknife_sentence
+    from hframe_id.validation.cross_validation import LeaveOneOutTable, Spread
+
+    def spread(name, jackknife):
+        return Spread(name, "N", 1.0, jackknife, 0.9, 1.1, 10.0, jackknife)
+
+    table = LeaveOneOutTable(("x",), (), (spread("F_c", 0.5), spread("M", 0.01)))
+    result = SimpleNamespace(estimates={n: SimpleNamespace(std_error=0.1) for n in ("F_c", "M")})
+    sentence = " ".join(_jackknife_sentence(result, table))
+    assert "F_c (5x)" in sentence and "M (" not in sentence
+    table = LeaveOneOutTable(("x",), (), (spread("M", 0.01),))
+    assert _jackknife_sentence(result, table) == []

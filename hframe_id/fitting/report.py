@@ -313,15 +313,41 @@ def _not_identified_lines(result: FitResult) -> list[str]:
     return [*lines, ""]
 
 
-def _cross_validation_lines(table: LeaveOneOutTable) -> list[str]:
+def _cross_validation_lines(result: FitResult, table: LeaveOneOutTable) -> list[str]:
     return [
         "## Leave-one-recording-out cross-validation",
         "",
         "Each recording simulated with the parameters fitted to the others (same options and "
         "start): simulation fit [%] = 100 (1 - |y - y_hat| / |y - mean(y)|) per channel, and "
-        "the free parameters' spread across the converged folds (SI).",
+        "the free parameters' spread across the converged folds (SI), with the "
+        "experiment-level jackknife standard error.",
         "",
         table.markdown(),
+        "",
+        *_jackknife_sentence(result, table),
+    ]
+
+
+#: Jackknife std over the fit's std error above which the report says the intervals are
+#: too narrow: 2 (a ratio of two noisy standard errors, with few experiments, scatters by
+#: tens of percent even when both estimate the same spread).
+JACKKNIFE_RATIO = 2.0
+
+
+def _jackknife_sentence(result: FitResult, table: LeaveOneOutTable) -> list[str]:
+    """Which parameters move across experiments by more than their intervals allow."""
+    wider = []
+    for s in table.spread:
+        est = result.estimates.get(s.name)
+        if est and est.std_error > 0 and s.jackknife_std > JACKKNIFE_RATIO * est.std_error:
+            wider.append(f"{s.name} ({s.jackknife_std / est.std_error:.3g}x)")
+    if not wider:
+        return []
+    return [
+        "The fit's intervals account for noise only. Across experiments, these parameters "
+        "move by more than twice their standard error (jackknife std / fit std): "
+        f"{', '.join(wider)}. Model error that differs between experiments is larger than the "
+        "intervals say; read the jackknife std as their uncertainty.",
         "",
     ]
 
@@ -394,7 +420,7 @@ def _report_lines(
         *_not_identified_lines(result),
     ]
     if cross_validation is not None:
-        lines += _cross_validation_lines(cross_validation)
+        lines += _cross_validation_lines(result, cross_validation)
     lines += _signal_lines(result, recordings, thesis, label, plots, folder)
     if len(result.free_names) > 1:
         plot_correlation(result, plots / "correlation.png")

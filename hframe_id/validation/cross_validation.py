@@ -48,6 +48,10 @@ class Spread:
     """One free parameter across the successful folds (SI; ``unit`` names it).
 
     ``relative_std_percent`` = 100 std / |mean| (NaN with fewer than two folds).
+    ``jackknife_std``: the experiment-level (delete-one) jackknife standard error of the
+    all-recordings estimate, sqrt((n - 1) / n sum (p_i - mean)^2) = (n - 1) / sqrt(n) std. It
+    needs no noise model and holds model error that differs between experiments, which the
+    fit's own intervals (noise only) do not.
     """
 
     name: str
@@ -57,6 +61,7 @@ class Spread:
     minimum: float
     maximum: float
     relative_std_percent: float
+    jackknife_std: float
 
 
 @dataclass(frozen=True)
@@ -77,13 +82,13 @@ class LeaveOneOutTable:
             lines.append(f"| {fold.held_out} | {status} | {cells} |")
         lines += [
             "",
-            "| parameter | mean | std | min | max | std / mean [%] |",
-            "| --- | --- | --- | --- | --- | --- |",
+            "| parameter | mean | std | min | max | std / mean [%] | jackknife std |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
         ]
         for s in self.spread:
             lines.append(
                 f"| {s.name} [{s.unit}] | {s.mean:.6g} | {s.std:.3g} | {s.minimum:.6g} | "
-                f"{s.maximum:.6g} | {s.relative_std_percent:.2f} |"
+                f"{s.maximum:.6g} | {s.relative_std_percent:.2f} | {s.jackknife_std:.3g} |"
             )
         return "\n".join(lines)
 
@@ -108,6 +113,7 @@ def _spread(folds: Sequence[Fold], initial: ParameterSet) -> tuple[Spread, ...]:
                 minimum=float(values.min()),
                 maximum=float(values.max()),
                 relative_std_percent=100.0 * std / abs(mean) if mean else math.nan,
+                jackknife_std=(values.size - 1) / math.sqrt(values.size) * std,
             )
         )
     return tuple(rows)
