@@ -4,68 +4,116 @@ Each command module defines ``register(subparsers)``, which adds its parser and 
 ``handler`` to a function ``(args) -> int``. Errors derived from ``HframeIdError`` are printed
 as one line (``hframe-id: error: ...``) with exit status 2; nothing is printed from deep inside
 a library.
+
+Only the module of the command being run is imported (``hframe-id --help`` imports none):
+every other command gets a placeholder parser that shows its line in the listing. Command
+modules keep CasADi, NumPy, pandas and matplotlib out of their module level for the same
+reason, so that ``hframe-id COMMAND --help`` answers at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
 
 from hframe_id import __version__
-from hframe_id.cli import (
-    control_command,
-    datasets_command,
-    export_command,
-    fit_command,
-    import_command,
-    inspect_command,
-    linearize_command,
-    model_files,
-    models_command,
-    params_command,
-    record_command,
-    reduce_command,
-    reproduce_command,
-    simulate_command,
-    validate_command,
-)
+from hframe_id.cli import model_files
 from hframe_id.errors import HframeIdError
 
-COMMAND_MODULES = (
-    models_command,
-    params_command,
-    linearize_command,
-    export_command,
-    reduce_command,
-    record_command,
-    inspect_command,
-    import_command,
-    datasets_command,
-    simulate_command,
-    control_command,
-    reproduce_command,
-    fit_command,
-    validate_command,
+#: The subcommands in the order ``hframe-id --help`` lists them: (name, module, one line of
+#: help). To add a command, write a module with ``register(subparsers)`` and add its line.
+COMMANDS: tuple[tuple[str, str, str], ...] = (
+    (
+        "models",
+        "hframe_id.cli.models_command",
+        "list model variants and their signals and parameters",
+    ),
+    ("params", "hframe_id.cli.params_command", "show or check parameter files"),
+    (
+        "linearize",
+        "hframe_id.cli.linearize_command",
+        "poles and zeros of the model linearized about rest",
+    ),
+    (
+        "export",
+        "hframe_id.cli.export_command",
+        "export parameters or the linear state-space model (JSON, CSV, MATLAB, ...)",
+    ),
+    (
+        "reduce",
+        "hframe_id.cli.reduce_command",
+        "reduce an hframe-20 parameter file to an hframe-8 one (section 4.1)",
+    ),
+    ("record", "hframe_id.cli.record_command", "run an experiment on a rig and record it (MCAP)"),
+    (
+        "inspect",
+        "hframe_id.cli.inspect_command",
+        "show what a recording holds and how good its data is",
+    ),
+    (
+        "import",
+        "hframe_id.cli.import_command",
+        "convert a CSV or MATLAB .mat log into the log format (any rig)",
+    ),
+    ("datasets", "hframe_id.cli.datasets_command", "make, list or verify the shipped datasets"),
+    (
+        "simulate",
+        "hframe_id.cli.simulate_command",
+        "open-loop simulation (steps, pulses, CSV or recorded voltages) to CSV / MCAP",
+    ),
+    (
+        "control",
+        "hframe_id.cli.control_command",
+        "closed-loop PID simulation on the test square or point-to-point moves",
+    ),
+    (
+        "reproduce",
+        "hframe_id.cli.reproduce_command",
+        "reproduce the Chapter 5 controller tables (markdown report with plots)",
+    ),
+    (
+        "fit",
+        "hframe_id.cli.fit_command",
+        "fit stiffness, friction and inertia to recordings (multiple shooting)",
+    ),
+    (
+        "validate",
+        "hframe_id.cli.validate_command",
+        "simulation / k-step fit [%%] and residual tests of parameter files on recordings",
+    ),
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def chosen_command(argv: Sequence[str]) -> str | None:
+    """The subcommand named on the command line: its first word that is not an option (the
+    top-level options, ``--help`` and ``--version``, take no value)."""
+    return next((word for word in argv if not word.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser with ``command`` registered in full (its module imported) and the other
+    commands as placeholders; ``command=None``: placeholders only."""
     parser = argparse.ArgumentParser(
         prog="hframe-id",
         description="Identify, simulate and control belt-driven H-frame XY stages.",
     )
     parser.add_argument("--version", action="version", version=f"hframe-id {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for module in COMMAND_MODULES:
-        module.register(subparsers)
-    for name in model_files.COMMANDS:
-        model_files.add_option(subparsers.choices[name])
+    for name, module, help_line in COMMANDS:
+        if name == command:
+            importlib.import_module(module).register(subparsers)
+        else:
+            subparsers.add_parser(name, help=help_line, add_help=False)
+    if command in model_files.COMMANDS:
+        model_files.add_option(subparsers.choices[command])
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(chosen_command(argv))
     args = parser.parse_args(argv)
     try:
         model_files.load(args)

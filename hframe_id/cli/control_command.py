@@ -11,13 +11,8 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-import pandas as pd
-
-from hframe_id.control.closed_loop import check_hframe, simulate_closed_loop
-from hframe_id.control.metrics import leg_metrics, metrics_json
-from hframe_id.control.pid import SAMPLE_PERIOD_S, ControllerOptions, PIDGains
 from hframe_id.control.trajectory import (
     SQUARE_F_A,
     SQUARE_SIDE_M,
@@ -27,9 +22,11 @@ from hframe_id.control.trajectory import (
     square,
 )
 from hframe_id.errors import OptionError
-from hframe_id.models import build_model
-from hframe_id.parameters import load_parameter_file
-from hframe_id.simulation.friction import FRICTION_MODELS, FrictionOptions
+
+if TYPE_CHECKING:  # CasADi and pandas are imported when the loop runs, not for --help
+    import pandas as pd
+
+    from hframe_id.control.pid import ControllerOptions
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,9 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=1.0,
         help="multiply motor 2's gains (section 5.7 uses 1.1)",
     )
-    gains.add_argument(
-        "--sample-time", type=float, default=SAMPLE_PERIOD_S, help="T [s] (default 0.001)"
-    )
+    gains.add_argument("--sample-time", type=float, help="T [s] (default 0.001)")
     gains.add_argument(
         "--delay-samples",
         type=int,
@@ -88,7 +83,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
         help="reachable rectangle [m] (default +/-0.1 m)",
     )
-    parser.add_argument("--friction", choices=FRICTION_MODELS, default="smooth")
+    parser.add_argument("--friction", metavar="{smooth,stick-slip}", default="smooth")
     parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")
@@ -128,13 +123,16 @@ def build_trajectory(args: argparse.Namespace):
 
 
 def _controller(args: argparse.Namespace) -> ControllerOptions:
-    if not (math.isfinite(args.sample_time) and args.sample_time > 0):
-        raise OptionError(f"--sample-time must be > 0 s, got {args.sample_time}")
+    from hframe_id.control.pid import SAMPLE_PERIOD_S, ControllerOptions, PIDGains
+
+    sample_time = SAMPLE_PERIOD_S if args.sample_time is None else args.sample_time
+    if not (math.isfinite(sample_time) and sample_time > 0):
+        raise OptionError(f"--sample-time must be > 0 s, got {sample_time}")
     gains = PIDGains(args.kp, args.ki, args.kd)
     return ControllerOptions(
         gains,
         gains.scaled(args.motor2_gain_scale),
-        args.sample_time,
+        sample_time,
         delay_samples=args.delay_samples,
     )
 
@@ -147,6 +145,9 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def _signals(result) -> pd.DataFrame:
+    import numpy as np
+    import pandas as pd
+
     frame = {"time [s]": result.time_s}
     for j, axis in enumerate(("x", "y")):
         frame[f"{axis}_desired [m]"] = result.reference_xy_m[:, j]
@@ -161,6 +162,14 @@ def _signals(result) -> pd.DataFrame:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from hframe_id.control.closed_loop import check_hframe, simulate_closed_loop
+    from hframe_id.control.metrics import leg_metrics, metrics_json
+    from hframe_id.models import build_model
+    from hframe_id.parameters import load_parameter_file
+    from hframe_id.simulation.friction import FrictionOptions
+
     controller = _controller(args)
     trajectory = build_trajectory(args)
     workspace = Workspace(*args.workspace) if args.workspace else Workspace()

@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hframe_id.analysis.export import FORMATS, export_format, render, write_atomic
 from hframe_id.errors import OptionError
-from hframe_id.parameters import load_parameter_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from hframe_id.analysis.export import FORMATS  # the formats' descriptions, for --help
+
     formats = "; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
     parser = subparsers.add_parser(
         "export",
@@ -31,6 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.analysis.export import export_format, render, write_atomic
+    from hframe_id.parameters import load_parameter_file
+
     fmt = export_format(args.format)
     if fmt.binary and not args.out:
         raise OptionError(f"format {fmt.name} writes a binary {fmt.suffix} file: give --out PATH")

@@ -10,24 +10,23 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hframe_id.errors import FitError, OptionError
-from hframe_id.fitting import FitOptions, FitResult, fit_recordings
-from hframe_id.fitting.options import CONTINUITY, NOISE_METHODS, SOLVERS, UNCERTAINTY_METHODS
-from hframe_id.fitting.output import write_parameter_file
-from hframe_id.fitting.report import (
-    mismatch_rows,
-    mismatch_statement,
-    write_report,
+from hframe_id.fitting.options import (
+    CONTINUITY,
+    NOISE_METHODS,
+    SOLVERS,
+    UNCERTAINTY_METHODS,
+    FitOptions,
 )
-from hframe_id.fitting.summary_json import fit_summary
-from hframe_id.models import VARIANTS, declaration
-from hframe_id.models.declaration import FIT_DEFAULT_KEYS
-from hframe_id.parameters import ParameterSet, load_parameter_file
-from hframe_id.recordings import read_recording
-from hframe_id.recordings.recording import Recording
 from hframe_id.resources import datasets_dir
-from hframe_id.validation.cross_validation import LeaveOneOutTable, leave_one_out
+
+if TYPE_CHECKING:  # the fitting itself (CasADi, SciPy) is imported when a fit runs
+    from hframe_id.fitting import FitResult
+    from hframe_id.parameters import ParameterSet
+    from hframe_id.recordings.recording import Recording
+    from hframe_id.validation.cross_validation import LeaveOneOutTable
 
 #: Where bare recording names are looked up: the working directory's datasets/, then the
 #: shipped datasets/ (the checkout's, or an installed package's).
@@ -98,14 +97,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--initial",
         metavar="FILE",
         help="initial parameter file (default: the model's reference set, for the thesis's "
-        "variants their table: "
-        + ", ".join(f"{v}: models/{declaration(v).reference_file.name}" for v in VARIANTS)
-        + ")",
+        "variants their table: one-axis: models/one-axis-table2.3.yaml, hframe-20: "
+        "models/hframe-20-table3.1.yaml, hframe-8: models/hframe-8-table4.2.yaml)",
     )
     parser.add_argument(
         "--model",
         metavar="VARIANT",
-        help=f"model variant to fit ({', '.join(VARIANTS)} or one from --model-file; default: "
+        help="model variant to fit (one-axis, hframe-20, hframe-8, any `hframe-id models` "
+        "lists, or one from --model-file; default: "
         "the model of the --model-file, else the recordings' rig variant); picks the default "
         "initial file",
     )
@@ -295,6 +294,8 @@ def check_out_dir(out_dir: Path) -> None:
 
 
 def _options(args: argparse.Namespace) -> FitOptions:
+    from hframe_id.models.declaration import FIT_DEFAULT_KEYS
+
     bounds = {}
     for name, text in _pairs(args.bounds, "--bounds").items():
         low, sep, high = text.partition(":")
@@ -345,6 +346,8 @@ def _options(args: argparse.Namespace) -> FitOptions:
 
 def _with_model_defaults(options: FitOptions, args: argparse.Namespace, variant: str):
     """The options with the model's fit defaults where the command line set nothing."""
+    from hframe_id.models import declaration
+
     declared = declaration(variant)
     unset = {k: v for k, v in declared.fit_defaults if getattr(args, k) is None}
     try:
@@ -355,6 +358,9 @@ def _with_model_defaults(options: FitOptions, args: argparse.Namespace, variant:
 
 def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path]:
     """The start of the fit and its file, which must be of the fitted ``variant``."""
+    from hframe_id.models import declaration
+    from hframe_id.parameters import load_parameter_file
+
     if args.initial:
         path = Path(args.initial)
     elif declaration(variant).reference_file is not None:
@@ -368,6 +374,7 @@ def _cross_validate(
     recordings: list[Recording], initial: ParameterSet, options: FitOptions, quiet: bool
 ) -> LeaveOneOutTable:
     """Leave-one-recording-out refits with the fit's options, a line per fold on stderr."""
+    from hframe_id.validation.cross_validation import leave_one_out
 
     def announce(fold: int, folds: int, held_out: str) -> None:
         if not quiet:
@@ -391,6 +398,8 @@ def _cross_validate(
 
 def _print_mismatch(result: FitResult, stream) -> None:
     """The model-mismatch statement and its per-channel table, if the fit estimated noise."""
+    from hframe_id.fitting.report import mismatch_rows, mismatch_statement
+
     statement = mismatch_statement(result)
     if statement is None:
         return
@@ -412,6 +421,9 @@ def _write_outputs(
 ) -> tuple[str, Path | None, Path]:
     """The parameter file (a successful fit only) and the report with its plots: all of them
     or, on any exception, none (nor ``out_dir`` if this created it)."""
+    from hframe_id.fitting.output import write_parameter_file
+    from hframe_id.fitting.report import write_report
+
     created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -433,6 +445,10 @@ def _write_outputs(
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.fitting import fit_recordings
+    from hframe_id.fitting.summary_json import fit_summary
+    from hframe_id.recordings import read_recording
+
     options = _options(args)
     out_dir = Path(args.out_dir)
     check_out_dir(out_dir)

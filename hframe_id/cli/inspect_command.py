@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from hframe_id.recordings import log_format as fmt
-from hframe_id.recordings.reader import read_log, read_recording
-from hframe_id.recordings.recording import Recording
+if TYPE_CHECKING:  # the reader (NumPy, MCAP) is imported when a file is inspected
+    from hframe_id.recordings.recording import Recording
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,6 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.recordings.reader import read_log, read_recording
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         recording = read_recording(args.recording)
@@ -49,6 +49,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def describe(recording: Recording, log) -> list[str]:
+    import numpy as np
+
+    from hframe_id.recordings import log_format as fmt
+
     state = "finished" if log.complete else f"UNFINISHED, salvaged ({log.problem})"
     lines = [
         f"file           {log.path} ({log.bytes_total} bytes, {state})",
@@ -127,6 +131,7 @@ def plot(recording: Recording, target: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
     kinds = [("u [V]", [(n, recording.inputs[:, i]) for i, n in enumerate(recording.input_names)])]
     angles = [

@@ -5,9 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from hframe_id.analysis.export import pole_zero_report
-from hframe_id.parameters import load_parameter_file
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -57,6 +54,9 @@ def format_text(report: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.analysis.export import pole_zero_report
+    from hframe_id.parameters import load_parameter_file
+
     params = load_parameter_file(args.file)
     report = pole_zero_report(
         params,

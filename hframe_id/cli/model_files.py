@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from hframe_id.models import load_model_file
-
 #: The commands that take model files: every one that builds, fits or exports a model.
 COMMANDS = ("fit", "simulate", "validate", "linearize", "export", "params", "models", "control")
 
@@ -29,5 +27,11 @@ def add_option(parser: argparse.ArgumentParser) -> None:
 
 def load(args: argparse.Namespace) -> None:
     """Load and register the model files on the command line (``args.loaded_models``: their
-    variant names, in order)."""
-    args.loaded_models = [load_model_file(path).name for path in getattr(args, "model_file", [])]
+    variant names, in order). The models package (CasADi) is imported only if there are any."""
+    paths = getattr(args, "model_file", [])
+    if not paths:
+        args.loaded_models = []
+        return
+    from hframe_id.models import load_model_file
+
+    args.loaded_models = [load_model_file(path).name for path in paths]

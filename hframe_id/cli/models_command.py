@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from hframe_id.models import build_model, declaration, parameter_specs, variants
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -20,6 +18,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def describe(variant: str) -> dict:
+    from hframe_id.models import build_model, declaration, parameter_specs
+
     model = build_model(variant)
     return {
         "variant": variant,
@@ -37,6 +37,8 @@ def describe(variant: str) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.models import variants
+
     described = [describe(v) for v in variants()]
     if args.json:
         print(json.dumps(described, indent=2))

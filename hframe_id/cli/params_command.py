@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
-from hframe_id.analysis.export import parameter_rows
 from hframe_id.errors import HframeIdError
-from hframe_id.parameters import ParameterSet, load_parameter_file
+
+if TYPE_CHECKING:
+    from hframe_id.parameters import ParameterSet
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -36,6 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def format_table(params: ParameterSet) -> str:
     """The header lines and the parameter table of a parameter set."""
+    from hframe_id.analysis.export import parameter_rows
+
     header = [
         ("file", str(params.path) if params.path else "-"),
         ("model", params.variant),
@@ -67,11 +71,15 @@ def format_table(params: ParameterSet) -> str:
 
 
 def run_show(args: argparse.Namespace) -> int:
+    from hframe_id.parameters import load_parameter_file
+
     print(format_table(load_parameter_file(args.file)))
     return 0
 
 
 def run_check(args: argparse.Namespace) -> int:
+    from hframe_id.parameters import load_parameter_file
+
     failed = 0
     for path in args.files:
         try:

@@ -7,16 +7,6 @@ import sys
 from pathlib import Path
 
 from hframe_id.errors import OptionError
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
-from hframe_id.recordings.writer import Attachment
-from hframe_id.rig.logger import RunOptions, run_experiment
-from hframe_id.rig.protocols import (
-    MultisineProtocol,
-    PulseProtocol,
-    StepProtocol,
-    load_sequence_csv,
-)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -104,6 +94,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _protocol(args: argparse.Namespace, n_inputs: int):
+    from hframe_id.rig.protocols import (
+        MultisineProtocol,
+        PulseProtocol,
+        StepProtocol,
+        load_sequence_csv,
+    )
+
     duration = args.duration
     if args.protocol == "step":
         if args.v1 is None:
@@ -160,6 +157,8 @@ def make_rig(args: argparse.Namespace):
 
             plant = load_plant_file(args.plant)
         else:
+            from hframe_id.parameters import load_parameter_file
+
             plant = load_parameter_file(args.params)
         return SimRig(plant, seed=args.seed, paced=not args.fast)
     from hframe_id.rig.serial_rig import SerialRig
@@ -191,6 +190,10 @@ def _progress_display(stream):
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
+    from hframe_id.recordings.writer import Attachment
+    from hframe_id.rig.logger import RunOptions, run_experiment
+
     rig = make_rig(args)
     try:
         protocol = _protocol(args, len(rig.info.inputs))

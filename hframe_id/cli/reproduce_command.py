@@ -11,11 +11,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from hframe_id.control.closed_loop import check_hframe
-from hframe_id.control.reproduction import reproduce, write_report
 from hframe_id.errors import OptionError
-from hframe_id.models import build_model
-from hframe_id.parameters import load_parameter_file
 
 DEFAULT_PARAMS = Path("models/hframe-8-table4.2.yaml")
 
@@ -41,6 +37,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.control.closed_loop import check_hframe
+    from hframe_id.control.reproduction import reproduce, write_report
+    from hframe_id.models import build_model
+    from hframe_id.parameters import load_parameter_file
+
     params = load_parameter_file(args.params)
     check_hframe(build_model(params.variant))
     if args.out.exists() and not args.out.is_dir():

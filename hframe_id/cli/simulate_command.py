@@ -12,16 +12,15 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from hframe_id.errors import OptionError
-from hframe_id.models import build_model
-from hframe_id.parameters import load_parameter_file
-from hframe_id.simulation.friction import FRICTION_MODELS, FrictionOptions
-from hframe_id.simulation.inputs import MotorStep, change_points, step_inputs
-from hframe_id.simulation.open_loop import SimulationResult, run_open_loop
+
+if TYPE_CHECKING:  # imported when a simulation runs, not for --help
+    import numpy as np
+    import pandas as pd
+
+    from hframe_id.simulation.open_loop import SimulationResult
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -69,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--friction",
-        choices=FRICTION_MODELS,
+        metavar="{smooth,stick-slip}",
         help="--params: Coulomb friction law, smooth (tanh, the model's; default) or stick-slip "
         "(Table 2.2); a plant file has its own",
     )
@@ -93,6 +92,10 @@ def _positive(name: str, value: float | None) -> None:
 
 def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float, str]:
     """(table, sample time, description) from exactly one kind of input."""
+    import numpy as np
+
+    from hframe_id.simulation.inputs import MotorStep, step_inputs
+
     kinds = [name for name in ("step", "csv", "recording") if getattr(args, name)]
     if len(kinds) != 1:
         raise OptionError(
@@ -135,6 +138,9 @@ def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float,
 
 
 def _frame(result: SimulationResult) -> pd.DataFrame:
+    import numpy as np
+    import pandas as pd
+
     data = {"time [s]": result.time_s}
     for j, label in enumerate(result.input_labels):
         data[label] = np.append(result.inputs[:, j], np.nan)  # nothing is held after t_N
@@ -161,6 +167,7 @@ def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source:
     from hframe_id.rig.logger import RunOptions, run_experiment
     from hframe_id.rig.protocols import SequenceProtocol
     from hframe_id.rig.sim import SimRig
+    from hframe_id.simulation.inputs import change_points
 
     times, volts = change_points(table, dt)
     protocol = SequenceProtocol(times, volts, table.shape[0] * dt, source=source)
@@ -185,6 +192,9 @@ def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source:
 
 def _load_plant(args: argparse.Namespace):
     """(plant or parameter set, its model) from --plant or --params."""
+    from hframe_id.models import build_model
+    from hframe_id.parameters import load_parameter_file
+
     if (args.params is None) == (args.plant is None):
         raise OptionError("give one of --params (a parameter file) or --plant (a plant file)")
     if args.plant is None:
@@ -203,6 +213,8 @@ def _load_plant(args: argparse.Namespace):
 def _simulate(args, plant, model, table: np.ndarray, dt: float) -> tuple[SimulationResult, int]:
     """The CSV's signals and the RK4 substeps used."""
     from hframe_id.rig.plant import Plant
+    from hframe_id.simulation.friction import FrictionOptions
+    from hframe_id.simulation.open_loop import run_open_loop
 
     if isinstance(plant, Plant):
         from hframe_id.rig.realistic import run_plant
@@ -223,6 +235,8 @@ def _simulate(args, plant, model, table: np.ndarray, dt: float) -> tuple[Simulat
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     plant, model = _load_plant(args)
     if args.substeps is not None and args.substeps < 1:
         raise OptionError(f"--substeps must be >= 1, got {args.substeps}")

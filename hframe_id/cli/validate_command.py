@@ -11,13 +11,10 @@ from pathlib import Path
 
 from hframe_id.cli.fit_command import check_out_dir, resolve_dataset
 from hframe_id.errors import FitError, OptionError
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings import read_recording
-from hframe_id.validation import ValidationOptions, validate
-from hframe_id.validation.output import to_document, to_text
-from hframe_id.validation.plots import write_plots
-from hframe_id.validation.prediction import DEFAULT_HORIZON, DEFAULT_WINDOW
-from hframe_id.validation.residuals import DEFAULT_MAX_LAG
+
+#: The defaults of ``ValidationOptions``, stated in --help without importing the validation
+#: (SciPy, CasADi); tests/test_cli_help.py checks that they agree.
+HELP_DEFAULTS = {"horizon": 10, "window": 10, "max_lag": 25}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,23 +47,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--horizon",
         type=int,
-        default=DEFAULT_HORIZON,
         metavar="K",
-        help=f"prediction horizon [samples] (0: no prediction; default {DEFAULT_HORIZON})",
+        help=f"prediction horizon [samples] (0: no prediction; default {HELP_DEFAULTS['horizon']})",
     )
     parser.add_argument(
         "--window",
         type=int,
-        default=DEFAULT_WINDOW,
         metavar="M",
-        help=f"past samples for the prediction's state estimate (default {DEFAULT_WINDOW})",
+        help="past samples for the prediction's state estimate "
+        f"(default {HELP_DEFAULTS['window']})",
     )
     parser.add_argument(
         "--max-lag",
         type=int,
-        default=DEFAULT_MAX_LAG,
         metavar="L",
-        help=f"largest lag of the residual correlations [samples] (default {DEFAULT_MAX_LAG})",
+        help="largest lag of the residual correlations [samples] "
+        f"(default {HELP_DEFAULTS['max_lag']})",
     )
     parser.add_argument("--plot", metavar="DIR", help="write compare and resid PNGs to DIR")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -74,6 +70,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _read(names: list[str]) -> list:
+    from hframe_id.recordings import read_recording
+
     recordings = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -85,7 +83,13 @@ def _read(names: list[str]) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
-    options = ValidationOptions(horizon=args.horizon, window=args.window, max_lag=args.max_lag)
+    from hframe_id.parameters import load_parameter_file
+    from hframe_id.validation import ValidationOptions, validate
+    from hframe_id.validation.output import to_document, to_text
+    from hframe_id.validation.plots import write_plots
+
+    given = {k: getattr(args, k) for k in HELP_DEFAULTS if getattr(args, k) is not None}
+    options = ValidationOptions(**given)
     parameter_sets = [load_parameter_file(path) for path in [args.fit, *args.params]]
     recordings = _read(args.recordings)
     plot_dir = Path(args.plot) if args.plot else None
