@@ -83,6 +83,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
         "hframe_id.cli.validate_command",
         "simulation / k-step fit [%%] and residual tests of parameter files on recordings",
     ),
+    ("batch", "hframe_id.cli.batch_command", "fit every entry of a manifest on Dask into Parquet"),
+    ("fleet", "hframe_id.cli.fleet_command", "synthetic fleets; rig histories and drift flags"),
 )
 
 

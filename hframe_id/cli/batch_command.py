@@ -1,0 +1,97 @@
+"""``hframe-id batch``: fit every entry of a manifest on a Dask cluster into a results store."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from hframe_id.errors import OptionError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "batch",
+        help="fit every entry of a manifest on Dask; one Parquet row per fit",
+        description=(
+            "Fit every entry of a manifest (YAML or CSV: rig, time, recordings, model, "
+            "initial, free; docs/fleet.md) on a Dask cluster and store one row per fit in a "
+            "Parquet file, written as fits finish. Fits already in the store (same recordings' "
+            "sha256, model, initial file and options) are skipped. A fit that fails is a row "
+            "with its status and message. Parameter files (and reports) go to --out-dir. "
+            "Exit status: 0 every fit stored (even failed ones), 2 bad input, 130 Ctrl-C "
+            "(finished rows kept)."
+        ),
+    )
+    parser.add_argument("manifest", metavar="MANIFEST", help="the manifest (.yaml or .csv)")
+    parser.add_argument(
+        "--results", required=True, metavar="FILE", help="the results store (.parquet)"
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="an existing Dask scheduler (tcp://host:8786), used as it is; default: a "
+        "LocalCluster on this machine",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="LocalCluster worker processes, one thread each (default: the CPU count)",
+    )
+    parser.add_argument("--force", action="store_true", help="redo fits already stored")
+    parser.add_argument(
+        "--out-dir",
+        metavar="DIR",
+        help="where parameter files and reports go (default: <results stem>-fits/ beside "
+        "the results)",
+    )
+    parser.add_argument(
+        "--no-reports",
+        action="store_true",
+        help="write each fit's parameter file only, not its report with plots (~3 s a fit)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no line per fit on stderr")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hframe_id.fleet.manifest import load_manifest
+    from hframe_id.fleet.runner import dask_client, run_batch
+    from hframe_id.fleet.store import ResultsStore
+
+    if args.workers is not None and args.workers < 1:
+        raise OptionError(f"--workers must be >= 1, got {args.workers}")
+    if args.scheduler and args.workers is not None:
+        raise OptionError("--workers starts a LocalCluster; it cannot go with --scheduler")
+    results = Path(args.results)
+    if results.suffix != ".parquet":
+        raise OptionError(f"--results {results}: expected a .parquet file")
+    jobs = load_manifest(args.manifest)
+    store = ResultsStore(results)
+    out_dir = Path(args.out_dir) if args.out_dir else results.with_name(f"{results.stem}-fits")
+
+    def progress(row: dict, done: int, total: int) -> None:
+        if not args.quiet:
+            print(
+                f"[{done}/{total}] {row['rig']} {row['run_time'].isoformat()}: "
+                f"{row['status']} ({row['wall_time [s]']:.1f} s) {row['message']}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    try:
+        summary = run_batch(
+            jobs,
+            store,
+            lambda: dask_client(args.scheduler, args.workers),
+            out_dir,
+            force=args.force,
+            reports=not args.no_reports,
+            progress=progress,
+        )
+    except KeyboardInterrupt:
+        print(f"hframe-id: interrupted; {len(store)} row(s) in {results}", file=sys.stderr)
+        return 130
+    print(f"{summary.line()}; {len(store)} row(s) in {results}")
+    return 0

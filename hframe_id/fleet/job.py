@@ -1,0 +1,162 @@
+"""One fit of a batch, as run on a Dask worker: read, fit, write the fit's files, return a row.
+
+``run_job`` never raises for a bad fit: a solver that fails and an error while reading or
+fitting both come back as a row with ``status`` ``failed`` or ``error`` and the message, so
+that one bad run never stops a batch. The compiled kernels live in per-process caches
+(``functools.lru_cache`` in ``hframe_id.fitting.kernel``) over an on-disk cache of shared
+libraries; a worker process keeps them between tasks, so each is built (or loaded) once per
+worker, and ``warm_up`` builds them before the first task.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import socket
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+from hframe_id.fitting import FitOptions, FitResult, fit_recordings
+from hframe_id.fitting.kernel import cache_dir, compiled_windows
+from hframe_id.fitting.output import write_parameter_file
+from hframe_id.fitting.problem import resolve_free
+from hframe_id.fitting.report import write_report
+from hframe_id.fleet.manifest import FitJob
+from hframe_id.models import build_model, declaration
+from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings import read_recording
+
+#: FitOptions fields that do not change a fit's result, left out of its key.
+_NOT_IN_KEY = ("verbose", "progress", "threads")
+
+#: Row statuses: the fit converged; the solver failed (a report, no parameter file); an
+#: exception before or during the fit (unreadable recording, a worker that kept dying).
+STATUSES = ("ok", "failed", "error")
+
+
+def sha256_file(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def batch_options(job: FitJob) -> FitOptions:
+    """The options of a batch fit: the model's fit defaults, ``job.free``, one thread (a
+    worker runs one fit at a time; parallelism comes from workers), no progress output."""
+    return batch_options_for(job.model, job.free)
+
+
+def batch_options_for(model: str, free: tuple[str, ...] | None) -> FitOptions:
+    options = FitOptions(free=free, threads=1, verbose=0)
+    return dataclasses.replace(options, **dict(declaration(model).fit_defaults))
+
+
+def job_key(job: FitJob, options: FitOptions, digests: list[str]) -> str:
+    """The fit's identity in the store: sha256 of the recordings' sha256, the model, the
+    initial file's sha256 and every option that changes the result."""
+    fields = {
+        name: value
+        for name, value in dataclasses.asdict(options).items()
+        if name not in _NOT_IN_KEY
+    }
+    identity = {
+        "recordings": digests,
+        "model": job.model,
+        "initial": sha256_file(job.initial),
+        "options": fields,
+    }
+    text = json.dumps(identity, sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def base_row(job: FitJob, key: str, digests: list[str]) -> dict[str, Any]:
+    """The columns every row has, whatever the fit's outcome."""
+    return {
+        "key": key,
+        "rig": job.rig,
+        "run_time": job.time,
+        "entry": job.entry,
+        "model": job.model,
+        "recordings": ";".join(str(p) for p in job.recordings),
+        "recordings_sha256": ";".join(digests),
+        "initial": str(job.initial),
+        "free": ",".join(job.free) if job.free else "",
+    }
+
+
+def warm_up(jobs: list[FitJob]) -> str:
+    """Derive the models and build (or load from the disk cache) the compiled window kernels
+    of ``jobs``' models and free sets in this process, so that no task pays for them; returns
+    the process id and the kernel cache folder (``HFRAME_ID_CACHE``)."""
+    for model_name, free in sorted({(job.model, job.free or ()) for job in jobs}):
+        model = build_model(model_name)
+        options = batch_options_for(model_name, free or None)
+        names = resolve_free(model, options)
+        compiled_windows(model, tuple(model.parameter_names.index(n) for n in names))
+        compiled_windows(model, None)
+    return f"pid {os.getpid()}, kernel cache {cache_dir()}"
+
+
+def run_job(
+    job: FitJob, key: str, digests: list[str], out_dir: Path, reports: bool
+) -> dict[str, Any]:
+    """Fit ``job`` and write its parameter file (and, with ``reports``, its report) into
+    ``out_dir``; the store's row for it (``status``, ``message``, estimates, timings)."""
+    row = base_row(job, key, digests)
+    row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
+    start = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            recordings = [read_recording(p) for p in job.recordings]
+            initial = load_parameter_file(job.initial, variant=job.model)
+            result = fit_recordings(recordings, initial, batch_options(job))
+            out_dir.mkdir(parents=True, exist_ok=True)
+            fit_id, parameter_file = write_parameter_file(
+                result, recordings, list(job.recordings), job.initial, out_dir
+            )
+            report = (
+                write_report(result, recordings, fit_id, parameter_file, out_dir)
+                if reports
+                else None
+            )
+    except Exception as err:  # any failure of one fit is its row, not the batch's end
+        row.update(status="error", message=f"{type(err).__name__}: {err}")
+        row["wall_time [s]"] = time.perf_counter() - start
+        return row
+    row.update(
+        status="ok" if result.success else "failed",
+        message=result.message,
+        fit_id=fit_id,
+        parameter_file=str(parameter_file) if parameter_file else None,
+        report=str(report) if report else None,
+    )
+    row.update(result_columns(result))
+    row["wall_time [s]"] = time.perf_counter() - start
+    return row
+
+
+def result_columns(result: FitResult) -> dict[str, Any]:
+    """Estimate, std error, 95 % interval and identified flag of every free parameter, the
+    residual rms per channel and in noise std, cost, iterations and the solver's time."""
+    columns: dict[str, Any] = {
+        "cost": float(result.cost),
+        "iterations": int(result.iterations),
+        "fit_time [s]": float(result.wall_time_s),
+        "residual_rms [noise std]": result.residual_rms,
+    }
+    for name, est in result.estimates.items():
+        if not est.free:
+            continue
+        unit = f"[{est.unit}]"
+        columns[f"{name} {unit}"] = float(est.estimate)
+        columns[f"{name} std {unit}"] = float(est.std_error)
+        columns[f"{name} ci95 low {unit}"] = float(est.ci95[0])
+        columns[f"{name} ci95 high {unit}"] = float(est.ci95[1])
+        columns[f"{name} identified"] = bool(est.identified)
+    units = {s.name: s.unit for s in build_model(result.variant).outputs}
+    for channel, rms in result.diagnostics.get("channel_rms", {}).items():
+        columns[f"rms {channel} [{units.get(channel, 'SI')}]"] = float(rms)
+    return columns

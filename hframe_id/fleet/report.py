@@ -1,0 +1,138 @@
+"""The fleet report: each parameter over time per rig with its 95 % intervals, and the drift
+flags (``hframe_id.fleet.drift``) as a table, a markdown page and JSON."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from hframe_id.atomic import replace_atomically, staged_directory  # noqa: E402
+from hframe_id.fleet.drift import Drift, parameters_of, successful  # noqa: E402
+
+JSON_FORMAT_VERSION = "1.0"
+
+
+def plot_histories(frame: pd.DataFrame, threshold: float, out: Path) -> list[Path]:
+    """One PNG per parameter in ``out`` (replaced as a whole): per rig, the estimate's change
+    against the rig's first successful run [%] over run time, with its 95 % interval as error
+    bars and the drift threshold as dashed lines."""
+    ok = successful(frame)
+    names = []
+    if out.exists():
+        shutil.rmtree(out)
+    with staged_directory(out) as staging:
+        for name, unit in parameters_of(ok):
+            value = f"{name} [{unit}]"
+            fig, ax = plt.subplots(figsize=(7, 3.5))
+            for rig, runs in ok[ok[value].notna()].groupby("rig", sort=True):
+                base = runs[value].iloc[0]
+                change = 100 * (runs[value] / base - 1)
+                low = 100 * (runs[f"{name} ci95 low [{unit}]"] / base - 1)
+                high = 100 * (runs[f"{name} ci95 high [{unit}]"] / base - 1)
+                ax.errorbar(
+                    runs["run_time"],
+                    change,
+                    yerr=[change - low, high - change],
+                    marker="o",
+                    capsize=3,
+                    label=str(rig),
+                )
+            for level in (-100 * threshold, 100 * threshold):
+                ax.axhline(level, color="0.5", linestyle="--", linewidth=0.8)
+            ax.set_title(f"{value}: change against each rig's first run")
+            ax.set_ylabel("change [%]")
+            ax.set_xlabel("run time [UTC]")
+            ax.legend(fontsize="small", ncol=2, loc="best")
+            fig.autofmt_xdate()
+            fig.tight_layout()
+            fig.savefig(staging / f"{name}.png", dpi=90)
+            plt.close(fig)
+            names.append(f"{name}.png")
+    return [out / n for n in names]
+
+
+def flags_table(drifts: list[Drift]) -> list[list[str]]:
+    """Header and one row per flagged (rig, parameter)."""
+    rows = [["rig", "parameter", "baseline", "latest", "change [%]", "z", "runs"]]
+    for d in drifts:
+        if d.flagged:
+            rows.append(
+                [
+                    d.rig,
+                    f"{d.parameter} [{d.unit}]",
+                    f"{d.baseline:.5g}",
+                    f"{d.latest:.5g}",
+                    f"{100 * d.change:+.1f}",
+                    f"{d.z:+.1f}",
+                    str(d.runs),
+                ]
+            )
+    return rows
+
+
+def format_table(rows: list[list[str]]) -> str:
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    return "\n".join(
+        "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() for row in rows
+    )
+
+
+def summary(
+    frame: pd.DataFrame, drifts: list[Drift], threshold: float, results: Path, plots: Path
+) -> dict[str, Any]:
+    """The report as JSON: counts, the threshold and the ``flagged`` list."""
+    return {
+        "format_version": JSON_FORMAT_VERSION,
+        "results": str(results),
+        "threshold": threshold,
+        "rigs": int(frame["rig"].nunique()),
+        "fits": len(frame),
+        "by_status": {str(k): int(v) for k, v in frame["status"].value_counts().items()},
+        "plots": str(plots),
+        "flagged": [
+            {
+                "rig": d.rig,
+                "parameter": d.parameter,
+                "change": d.change,
+                "unit": d.unit,
+                "baseline": d.baseline,
+                "latest": d.latest,
+                "z": d.z,
+            }
+            for d in drifts
+            if d.flagged
+        ],
+    }
+
+
+def write_markdown(report: dict[str, Any], drifts: list[Drift], path: Path) -> Path:
+    """A markdown page with the counts, the flags table and the plots (written atomically)."""
+    rows = flags_table(drifts)
+    lines = [
+        "# Fleet report",
+        "",
+        f"{report['fits']} fits of {report['rigs']} rigs from `{report['results']}` "
+        f"({', '.join(f'{n} {s}' for s, n in report['by_status'].items())}). Drift: change "
+        f"of the latest run against the rig's first of at least {100 * report['threshold']:g} "
+        "% with the 95 % interval of the difference excluding zero.",
+        "",
+        "## Flagged",
+        "",
+    ]
+    if len(rows) > 1:
+        lines += ["| " + " | ".join(rows[0]) + " |", "|" + " --- |" * len(rows[0])]
+        lines += ["| " + " | ".join(row) + " |" for row in rows[1:]]
+    else:
+        lines.append("No drift flagged.")
+    lines += ["", "## Histories", ""]
+    plots = Path(report["plots"])
+    for png in sorted(plots.glob("*.png")):
+        lines.append(f"![{png.stem}]({plots.name}/{png.name})")
+    return replace_atomically(path, "\n".join(lines) + "\n")

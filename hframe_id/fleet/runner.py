@@ -1,0 +1,169 @@
+"""Run a manifest's fits on a Dask cluster, storing each row as it arrives.
+
+``client.submit(run_job, ...)`` per fit, then ``as_completed``: every finished fit is added
+to the store, which is written (atomically) at most every ``flush_interval_s`` and at the end,
+so a crash or Ctrl-C loses only unfinished fits. A worker that dies mid-fit has its task
+rescheduled on another worker by the scheduler (``distributed.scheduler.allowed-failures``
+times, default 3); a task that outlives that many workers becomes an ``error`` row.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from distributed import Client, LocalCluster, as_completed
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from hframe_id.fleet.job import base_row, batch_options, job_key, run_job, sha256_file, warm_up
+from hframe_id.fleet.manifest import FitJob
+from hframe_id.fleet.store import ResultsStore
+
+
+@dataclass
+class BatchSummary:
+    """What a batch did: fits planned, skipped (already stored), stored by status, wall time
+    [s]."""
+
+    planned: int
+    skipped: int
+    stored: dict[str, int] = field(default_factory=dict)
+    wall_time_s: float = 0.0
+
+    def line(self) -> str:
+        counts = ", ".join(f"{n} {status}" for status, n in sorted(self.stored.items()))
+        done = sum(self.stored.values())
+        return (
+            f"{self.planned} fit(s): {self.skipped} already stored, {done} stored now"
+            + (f" ({counts})" if counts else "")
+            + f" in {self.wall_time_s:.1f} s"
+        )
+
+
+class KernelWarmUp(WorkerPlugin):
+    """Builds the batch's models and compiled kernels once on every worker, including
+    workers that join (or replace a dead one) later."""
+
+    def __init__(self, jobs: list[FitJob]) -> None:
+        self.jobs = jobs
+
+    def setup(self, worker) -> None:
+        warm_up(self.jobs)
+
+
+@contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
+    """A client of the cluster at ``scheduler``, used as it is, or of a LocalCluster of
+    ``workers`` single-threaded worker processes (default: the CPU count) on this machine."""
+    if scheduler:
+        with Client(scheduler) as client:
+            yield client
+        return
+    n_workers = workers or os.cpu_count() or 1
+    with (
+        LocalCluster(
+            n_workers=n_workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def pending_jobs(
+    jobs: list[FitJob], store: ResultsStore, force: bool
+) -> tuple[list[tuple[FitJob, str, list[str]]], int]:
+    """The fits to run as (job, key, recordings' sha256), and how many are skipped because
+    the store holds their key (none with ``force``)."""
+    pending, skipped = [], 0
+    for job in jobs:
+        digests = [sha256_file(p) for p in job.recordings]
+        key = job_key(job, batch_options(job), digests)
+        if key in store and not force:
+            skipped += 1
+        else:
+            pending.append((job, key, digests))
+    return pending, skipped
+
+
+def run_batch(
+    jobs: list[FitJob],
+    store: ResultsStore,
+    connect: Callable[[], AbstractContextManager[Client]],
+    out_dir: Path,
+    *,
+    force: bool = False,
+    reports: bool = True,
+    flush_interval_s: float = 2.0,
+    progress: Callable[[dict[str, Any], int, int], None] | None = None,
+) -> BatchSummary:
+    """Fit every job the store lacks (all with ``force``) on the cluster ``connect`` gives.
+
+    Parameters
+    ----------
+    jobs : the manifest's fits.
+    store : the results store; rows are added as fits finish.
+    connect : returns a context manager giving the Dask client (``dask_client``, or
+        ``lambda: contextlib.nullcontext(client)``); called only if a fit is pending, so a
+        re-run with everything stored starts no cluster.
+    out_dir : where the fits' parameter files and reports go.
+    force : redo fits already stored.
+    reports : write each fit's report with plots (about 3 s per fit) beside its YAML.
+    flush_interval_s : the store is written at most this often [s] while fits arrive.
+    progress : called with (row, rows done, rows pending) after each stored row.
+
+    A KeyboardInterrupt cancels the unfinished fits, writes the finished rows and propagates.
+    """
+    start = time.perf_counter()
+    pending, skipped = pending_jobs(jobs, store, force)
+    summary = BatchSummary(len(jobs), skipped)
+    if not pending:
+        summary.wall_time_s = time.perf_counter() - start
+        return summary
+    with connect() as client:
+        _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress)
+        summary.wall_time_s = time.perf_counter() - start
+    return summary
+
+
+def _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress) -> None:
+    client.register_plugin(KernelWarmUp([job for job, _, _ in pending]), name="hframe-id-warm")
+    futures = {
+        client.submit(
+            run_job, job, key, digests, out_dir, reports, key=f"fit-{key[:20]}", pure=False
+        ): (job, key, digests)
+        for job, key, digests in pending
+    }
+    last_flush = time.perf_counter()
+    try:
+        for future in as_completed(futures):
+            row = _row(future, *futures[future])
+            store.add(row)
+            summary.stored[row["status"]] = summary.stored.get(row["status"], 0) + 1
+            if time.perf_counter() - last_flush >= flush_interval_s:
+                store.flush()
+                last_flush = time.perf_counter()
+            if progress is not None:
+                progress(row, sum(summary.stored.values()), len(pending))
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise
+    finally:
+        store.flush()
+
+
+def _row(future, job: FitJob, key: str, digests: list[str]) -> dict[str, Any]:
+    """The future's row, or an ``error`` row if the task itself failed (its workers died)."""
+    try:
+        row = future.result()
+    except Exception as err:
+        row = base_row(job, key, digests)
+        row.update(status="error", message=f"{type(err).__name__}: {err}")
+    return row
