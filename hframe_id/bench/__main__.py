@@ -10,7 +10,7 @@ import sys
 
 #: Section modules under hframe_id.bench; each has ``run()`` that prints its results (the
 #: fitting section takes the keyword options built from the flags in ``main``).
-SECTIONS: tuple[str, ...] = ("simulation", "logging", "fitting", "batch")
+SECTIONS: tuple[str, ...] = ("cli", "simulation", "logging", "fitting", "batch")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -259,6 +259,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out-dir", default="fits", help="where the fit and report go")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument(
+        "--no-plots", action="store_true", help="write the report without its figures (faster)"
+    )
+    parser.add_argument(
         "--json",
         action="store_true",
         help="print one JSON object on stdout (success, fit id, files, every parameter with "
@@ -418,6 +421,7 @@ def _write_outputs(
     initial_path: Path,
     out_dir: Path,
     cross_validation: LeaveOneOutTable | None,
+    plots: bool = True,
 ) -> tuple[str, Path | None, Path]:
     """The parameter file (a successful fit only) and the report with its plots: all of them
     or, on any exception, none (nor ``out_dir`` if this created it)."""
@@ -434,7 +438,9 @@ def _write_outputs(
         fit_id, parameter_file = write_parameter_file(
             result, recordings, paths, initial_path, out_dir
         )
-        report = write_report(result, recordings, fit_id, parameter_file, out_dir, cross_validation)
+        report = write_report(
+            result, recordings, fit_id, parameter_file, out_dir, cross_validation, plots
+        )
     except BaseException:
         if parameter_file is not None:
             parameter_file.unlink(missing_ok=True)
@@ -480,7 +486,7 @@ def run(args: argparse.Namespace) -> int:
     if result.success and len(recordings) > 1 and not args.no_cross_validation:
         cross_validation = _cross_validate(recordings, initial, options, args.quiet)
     fit_id, parameter_file, report = _write_outputs(
-        result, recordings, paths, initial_path, out_dir, cross_validation
+        result, recordings, paths, initial_path, out_dir, cross_validation, not args.no_plots
     )
     human = sys.stderr if args.json else sys.stdout
     print(result.summary(), file=human)

@@ -6,12 +6,13 @@ levels estimated from its residuals; parameter table against the thesis's Table 
 plant's parameters (sim rig), through the section-4.1 reduction for an hframe-20 plant
 fitted with hframe-8; parameters the data do not identify and which experiments would;
 leave-one-recording-out cross-validation; measured vs simulated signals (fitted and thesis
-parameters) and residuals for every experiment; the correlation matrix.
+parameters) and residuals for every experiment; the correlation matrix (values in the cells)
+with a sentence per group of strongly correlated parameters.
 
 Figures are ``matplotlib.figure.Figure`` objects drawn by the Agg canvas (matplotlib imported
 inside the plotting functions): importing this module sets no backend and no global state.
 Plots are drawn into a hidden temporary folder that is renamed into place at the end, so a
-failure leaves neither plots nor report behind.
+failure leaves neither plots nor report behind; ``plots=False`` writes the report alone.
 """
 
 from __future__ import annotations
@@ -212,12 +213,18 @@ def simulated_outputs(params: ParameterSet, rec: Recording, x0: np.ndarray) -> n
     return np.array(model.output.map(states.shape[0])(states.T)).T
 
 
-def _figure(size: tuple[float, float]):
-    """A figure on the Agg canvas (no pyplot, no backend switch)."""
+def _figure(size: tuple[float, float], margins: tuple[float, float, float, float]):
+    """A figure on the Agg canvas (no pyplot, no backend switch) with fixed ``margins``
+    (left, right, bottom, top) [in]: a layout engine would draw every figure twice."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=size, layout="constrained")
+    width, height = size
+    left, right, bottom, top = margins
+    figure = Figure(figsize=size)
+    figure.subplots_adjust(
+        left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height
+    )
     FigureCanvasAgg(figure)
     return figure
 
@@ -232,7 +239,8 @@ def plot_experiment(
 ) -> None:
     """Measured, fitted and thesis outputs of one recording, and the fit's residuals."""
     n = len(rec.output_names)
-    fig = _figure((4.2 * n, 6))
+    fig = _figure((4.2 * n, 6), (0.9, 0.15, 0.5, 0.6))
+    fig.subplots_adjust(wspace=0.45, hspace=0.15)
     axes = fig.subplots(2, n, sharex=True, squeeze=False)
     t = rec.time_s
     for j, name in enumerate(rec.output_names):
@@ -257,15 +265,89 @@ def plot_experiment(
 
 
 def plot_correlation(result: FitResult, path: Path) -> None:
+    """The free parameters' correlation matrix as a heat map with the values in the cells."""
     names = list(result.free_names)
-    fig = _figure((0.45 * len(names) + 2.5, 0.45 * len(names) + 1.5))
+    size = 0.6 * len(names)
+    fig = _figure((size + 2.5, size + 1.5), (1.2, 0.3, 1.2, 0.4))
     ax = fig.subplots()
     image = ax.imshow(result.correlation, cmap="RdBu_r", vmin=-1, vmax=1)
+    for (i, j), r in np.ndenumerate(result.correlation):
+        colour = "white" if abs(r) > 0.6 else "black"
+        ax.text(j, i, f"{r:.2f}", ha="center", va="center", fontsize=7, color=colour)
     ax.set_xticks(range(len(names)), names, rotation=90, fontsize=8)
     ax.set_yticks(range(len(names)), names, fontsize=8)
     fig.colorbar(image, ax=ax, shrink=0.8, label="correlation")
     ax.set_title("Correlation of the free parameters")
     fig.savefig(path, dpi=90)
+
+
+#: |correlation| from which the report calls two free parameters strongly correlated: their
+#: estimates move together, and the data fix a combination better than each one.
+STRONG_CORRELATION = 0.9
+
+
+def correlated_groups(result: FitResult) -> list[tuple[tuple[str, ...], float]]:
+    """Groups of free parameters joined by |correlation| >= STRONG_CORRELATION (connected
+    components), each with its largest |correlation|, strongest first."""
+    names = list(result.free_names)
+    strong = np.abs(np.asarray(result.correlation)) >= STRONG_CORRELATION
+    seen: set[int] = set()
+    groups = []
+    for start in range(len(names)):
+        if start in seen:
+            continue
+        members, todo = [], [start]
+        while todo:
+            k = todo.pop()
+            if k in seen:
+                continue
+            seen.add(k)
+            members.append(k)
+            todo += [j for j in np.flatnonzero(strong[k]) if j not in seen]
+        if len(members) > 1:
+            members.sort()
+            block = np.abs(np.asarray(result.correlation)[np.ix_(members, members)])
+            largest = float(np.max(block - np.eye(len(members))))
+            groups.append((tuple(names[k] for k in members), largest))
+    return sorted(groups, key=lambda group: -group[1])
+
+
+def correlation_lines(result: FitResult) -> list[str]:
+    """What the data cannot separate: a line per strongly correlated group, with the
+    experiments that would separate it where the fitter's design advice names any."""
+    groups = correlated_groups(result)
+    if not groups:
+        return [f"No two free parameters have |r| >= {STRONG_CORRELATION}."]
+    lines = [
+        f"Strongly correlated free parameters (|r| >= {STRONG_CORRELATION}): within each group, "
+        "these data determine a combination of the parameters much better than each one. "
+        "The intervals above include this; change one only together with the others (the "
+        "parameter file's uncertainty section holds the correlation matrix).",
+        "",
+    ]
+    advised = False
+    for group, largest in groups:
+        keys = ", ".join(result.estimates[name].key for name in group)
+        advice = sorted({d for name in group for d in result.estimates[name].identified_by})
+        advised |= bool(advice)
+        tail = f"; experiments that would separate them: {', '.join(advice)}" if advice else ""
+        lines.append(f"- {keys} (|r| up to {largest:.3f}){tail}")
+    if not advised:
+        lines += [
+            "",
+            "To separate a group, add an experiment that excites its members differently "
+            "(another amplitude, direction or frequency content); the fitter proposes standard "
+            "experiments only for parameters it cannot identify.",
+        ]
+    return lines
+
+
+def _correlation_lines(result: FitResult, plots: Path | None, folder: str) -> list[str]:
+    lines = ["## Correlation", ""]
+    if plots is not None:
+        plot_correlation(result, plots / "correlation.png")
+        lines += [f"![correlation]({folder}/correlation.png)", ""]
+    return [*lines, *correlation_lines(result), ""]
 
 
 def _status_lines(result: FitResult, recordings: list[Recording], parameter_file) -> list[str]:
@@ -357,10 +439,11 @@ def _signal_lines(
     recordings: list[Recording],
     thesis: ParameterSet | None,
     label: str,
-    plots: Path,
+    plots: Path | None,
     folder: str,
 ) -> list[str]:
-    """Per experiment: plot (drawn into ``plots``, linked as ``folder``) and rms residuals."""
+    """Per experiment: plot (drawn into ``plots``, linked as ``folder``; None: no plot) and
+    rms residuals."""
     units = output_units(result.variant)
     lines = ["## Measured and simulated signals", ""]
     x0s = result.initial_states
@@ -369,21 +452,17 @@ def _signal_lines(
         fitted = simulated_outputs(result.parameters, rec, x0)
         reference = simulated_outputs(thesis, rec, x0) if thesis else None
         png = f"{Path(rec.name()).stem}.png"
-        plot_experiment(rec, fitted, reference, label, units, plots / png)
+        if plots is not None:
+            plot_experiment(rec, fitted, reference, label, units, plots / png)
         rms = []
         for j, name in enumerate(rec.output_names):
             valid = rec.valid[:, j]
             scale, unit = _SCALE[units[name]]
             value = np.sqrt(np.mean((rec.outputs[valid, j] - fitted[valid, j]) ** 2))
             rms.append(f"{name} {scale * value:.3g} {unit}")
-        lines += [
-            f"### {rec.name()}",
-            "",
-            f"RMS residual: {', '.join(rms)}",
-            "",
-            f"![{rec.name()}]({folder}/{png})",
-            "",
-        ]
+        lines += [f"### {rec.name()}", "", f"RMS residual: {', '.join(rms)}", ""]
+        if plots is not None:
+            lines += [f"![{rec.name()}]({folder}/{png})", ""]
     return lines
 
 
@@ -393,7 +472,7 @@ def _report_lines(
     fit_id: str,
     parameter_file: Path | None,
     cross_validation: LeaveOneOutTable | None,
-    plots: Path,
+    plots: Path | None,
     folder: str,
 ) -> list[str]:
     thesis, label = model_reference(result.variant)
@@ -423,8 +502,7 @@ def _report_lines(
         lines += _cross_validation_lines(result, cross_validation)
     lines += _signal_lines(result, recordings, thesis, label, plots, folder)
     if len(result.free_names) > 1:
-        plot_correlation(result, plots / "correlation.png")
-        lines += ["## Correlation", "", f"![correlation]({folder}/correlation.png)", ""]
+        lines += _correlation_lines(result, plots, folder)
     return lines
 
 
@@ -435,6 +513,7 @@ def write_report(
     parameter_file: Path | None,
     out_dir: Path,
     cross_validation: LeaveOneOutTable | None = None,
+    plots: bool = True,
 ) -> Path:
     """Write ``<out_dir>/<fit id>-report.md`` and its plots in ``<fit id>-plots/``.
 
@@ -446,19 +525,25 @@ def write_report(
     parameter_file : the fit's parameter file, or None when none was written.
     out_dir : an existing folder.
     cross_validation : the leave-one-recording-out table, if computed.
+    plots : draw the plots (False: the report alone, without figures).
 
     Returns
     -------
     The report's path. The plots are drawn into a hidden temporary folder renamed to
     ``<fit id>-plots`` once all are drawn; on any exception neither plots nor report is left.
     """
-    plots = out_dir / f"{fit_id}-plots"
-    with staged_directory(plots) as staging:
+    if not plots:
         lines = _report_lines(
-            result, recordings, fit_id, parameter_file, cross_validation, staging, plots.name
+            result, recordings, fit_id, parameter_file, cross_validation, None, ""
+        )
+        return replace_atomically(out_dir / f"{fit_id}-report.md", "\n".join(lines) + "\n")
+    plot_dir = out_dir / f"{fit_id}-plots"
+    with staged_directory(plot_dir) as staging:
+        lines = _report_lines(
+            result, recordings, fit_id, parameter_file, cross_validation, staging, plot_dir.name
         )
     try:
         return replace_atomically(out_dir / f"{fit_id}-report.md", "\n".join(lines) + "\n")
     except BaseException:
-        shutil.rmtree(plots, ignore_errors=True)
+        shutil.rmtree(plot_dir, ignore_errors=True)
         raise
