@@ -25,6 +25,7 @@ from hframe_id.fleet.drift import DEFAULT_THRESHOLD
 from hframe_id.fleet.manifest import ManifestError, load_manifest
 from hframe_id.fleet.runner import run_batch
 from hframe_id.fleet.store import ResultsStore, read_results
+from hframe_id.fleet.studies import run_trials
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +52,7 @@ def client():
     """One worker thread in this process: fast to start, enough for the fault tests."""
     with (
         LocalCluster(
-            n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+            n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
         ) as cluster,
         Client(cluster) as client,
     ):
@@ -185,7 +186,7 @@ def test_a_killed_worker_loses_no_row(fleet, tmp_path):
     jobs = load_manifest(fleet / "manifest.yaml")
     store = ResultsStore(tmp_path / "r.parquet")
     with (
-        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
+        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=":0") as cluster,
         Client(cluster) as client,
     ):
         pids = client.run(os.getpid)
@@ -255,3 +256,10 @@ def test_repeated_run_of_a_rig_is_an_error(tmp_path):
     entry = {"rig": "r1", "time": "2026-01-05T08:00:00Z", "recordings": ["a.mcap"]}
     with pytest.raises(ManifestError, match="entry 2 .* repeats entry 1"):
         load_manifest(_manifest(tmp_path / "m.yaml", [entry, entry]))
+
+
+def test_study_trials_run_on_the_cluster(client):
+    seen = []
+    (trial,) = run_trials(_connect(client), "hframe-8", [1], on_trial=seen.append)
+    assert seen == [trial] and trial.seed == 1
+    assert trial.success and trial.max_error < 0.01  # the recovery tests' 1 %
