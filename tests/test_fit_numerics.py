@@ -26,8 +26,7 @@ def setup():
     u[50:300] = (-4.0, 2.0)
     rec = simulate_recording(truth, u, seed=4)
     problem = build_problem([rec], truth, FitOptions())
-    ms = MultipleShooting(problem)
-    ms.uniform_substeps = True
+    ms = MultipleShooting(problem).uniform()
     p = problem.p_initial
     n_sub = ms.substep_plan(p, problem.smoothing)["stiff"]
     states = simulate(ms.model, p, problem.experiments[0].inputs, 1e-3, n_substeps=n_sub)

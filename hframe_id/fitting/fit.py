@@ -364,8 +364,7 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
         problem.initial.replace_values(**values),
         replace(options, free=result.free_names + tuple(held), fix=(), bounds={}),
     )
-    ms = MultipleShooting(widened)
-    ms.uniform_substeps = True
+    ms = MultipleShooting(widened).uniform()
     theta = np.zeros(len(widened.free))
     ev = ms.evaluate(state.nodes, theta, widened.smoothing)
     jac, _, _ = GaussNewton(ms).condensed_jacobian(ev, state.nodes, np.ones(theta.size, bool))
@@ -436,9 +435,8 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
 def _warm_solve(ms, nodes, theta, active, stages, counter, progress, label):
     """Every window, exact continuity, from given nodes and parameters, monotone (no step
     may raise the merit: a warm start is kept, not thrown away by free steps)."""
-    ms.uniform_substeps = True
-    gn = GaussNewton(ms, progress)
-    gn.freeze_sloppy = True
+    ms = ms.uniform()
+    gn = GaussNewton(ms, progress, freeze_sloppy=True)
     state = SolverState(nodes.copy(), theta.copy(), active.copy())
     stages.append(
         _exact_stage(gn, state, label, cost_rtol=WARM_COST_RTOL, radius=0.5, watchdog=False)
@@ -605,7 +603,6 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
     n_free = len(problem.free)
     theta = np.zeros(n_free)
     smoothing = problem.smoothing
-    ms.uniform_substeps = False
     if options.first_stage:
         regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
         # Keep the regression only if it fits the data better than the given start does
@@ -716,7 +713,6 @@ def _solve(
     smoothing = problem.smoothing
     schedule = options.smoothing_schedule
     theta = theta.copy()
-    ms.uniform_substeps = False
     if prepass:
         nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
     measured = nodes
@@ -775,15 +771,14 @@ def _solve(
         known[starts] = False
         nodes[moving] = sub_state.nodes
         nodes = ms.fill_nodes(nodes, known, theta, smoothing)
-    ms.uniform_substeps = True
+    ms = ms.uniform()
     if prepass and moving.size:
         # The nodes at rest were simulated with the moving-window parameters, which put an
         # unmeasured pulley's stretch wherever those left it: estimate them again with the
         # parameters held (one-axis, study seed 8 from x/÷1.05: without this the exact stage
         # stalled and the fallback from the measured nodes ended with k2 58 % off).
         nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
-    gn = GaussNewton(ms, progress)
-    gn.freeze_sloppy = True
+    gn = GaussNewton(ms, progress, freeze_sloppy=True)
     if mismatch:
         # The model does not follow the data at the sensors' noise level: the weights are
         # wrong by orders of magnitude, so the all-window stages are left to the noise

@@ -20,7 +20,7 @@ as in CasADi's ``docs/examples/python/sysid.py``.
 The expression graph is one ``kernel.window_function`` (a ``map`` over windows of a
 ``mapaccum`` over samples of the RK4 substep): nothing is unrolled over the record.
 Every window is integrated with the stiff (at-rest) substep count of ``substep_plan``, as
-the Gauss-Newton solver's final stage does (``uniform_substeps``); if the parameters move
+the Gauss-Newton solver's final stage does (``MultipleShooting.uniform``); if the parameters move
 to where that count is no longer stable, the NLP is rebuilt with the larger count and
 solved again from its own solution.
 """

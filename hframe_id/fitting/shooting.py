@@ -115,12 +115,11 @@ class MultipleShooting:
             [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]
         )
         self._buffers: dict = {}
-        #: Integrate every window with the substeps the stiffest needs (the final stage):
-        #: the few-substep shortcut for windows in motion is accurate to ~1e-8 per sample
-        #: but differs from a uniform discretization by up to a noise sigma over a record.
+        #: Integrate every window with the substeps the stiffest needs (``uniform()``, the
+        #: final stages): the few-substep shortcut for windows in motion is accurate to
+        #: ~1e-8 per sample but differs from a uniform discretization by up to a noise sigma
+        #: over a record.
         self.uniform_substeps = False
-        #: (fast, stiff) substeps held during a stage (set by the solver), or None.
-        self.frozen_substeps: tuple[int, int] | None = None
         #: The compiled window loops, with and without derivatives (None: no C compiler).
         self.native = {
             True: compiled_windows(self.model, tuple(problem.free)),
@@ -165,7 +164,15 @@ class MultipleShooting:
         view.linked = consecutive if linked else np.zeros(len(windows) - 1, dtype=bool)
         view.first_window = np.flatnonzero(np.r_[True, ~view.linked])
         view._buffers = {}
-        view.frozen_substeps = None
+        return view
+
+    def uniform(self) -> MultipleShooting:
+        """The same transcription with every window integrated with the substeps the
+        stiffest needs (the all-window stages); this one is left as it is."""
+        view = object.__new__(MultipleShooting)
+        view.__dict__.update(self.__dict__)
+        view._buffers = {}
+        view.uniform_substeps = True
         return view
 
     def residual_rms(self, cost: float) -> float:
@@ -424,15 +431,7 @@ class MultipleShooting:
         )
 
     def _stage_plan(self, plan: dict) -> dict:
-        """The substep plan as the stage settings modify it (frozen, uniform)."""
-        if self.frozen_substeps is not None:
-            # Within a stage the discretization stays fixed (a jump from n to n + 1
-            # substeps moves the cost by noise-sized amounts and stalls the iteration near
-            # the optimum); it only grows when stability demands it.
-            fast, stiff = self.frozen_substeps
-            fast, stiff = max(fast, plan["fast"]), max(stiff, plan["stiff"])
-            self.frozen_substeps = (fast, stiff)
-            plan = {**plan, "fast": fast, "stiff": stiff}
+        """The substep plan with ``uniform()``'s setting applied."""
         if self.uniform_substeps:
             plan = {**plan, "fast": plan["stiff"]}
         return plan

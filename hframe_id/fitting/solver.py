@@ -165,7 +165,7 @@ def _determined(h_red: np.ndarray) -> np.ndarray:
 class GaussNewton:
     """Iterates the stages of the lifted problem."""
 
-    def __init__(self, shooting: MultipleShooting, progress=None):
+    def __init__(self, shooting: MultipleShooting, progress=None, freeze_sloppy: bool = False):
         self.ms = shooting
         self.problem = shooting.problem
         self.progress = progress
@@ -176,7 +176,7 @@ class GaussNewton:
         self.node_damping = NODE_DAMPING
         #: Hold undetermined parameters still (final stages, where the iterate is near an
         #: optimum; far from it a parameter can look undetermined only transiently).
-        self.freeze_sloppy = False
+        self.freeze_sloppy = freeze_sloppy
 
     def set_smoothing(self, smoothing, proximal: bool = True):
         """Proximal weight on node velocity steps: a step of one smoothing velocity costs as
@@ -446,7 +446,6 @@ class GaussNewton:
         self.set_smoothing(smoothing, proximal=True)
         self.links = ms.linked.copy()
         lo, hi = self.problem.theta_lower, self.problem.theta_upper
-        ms.frozen_substeps = None
         ev = self._evaluate(state, state.nodes, state.theta, smoothing)
         state.evaluation = ev
         state.velocity_hint = ev.states[:, :, ms.nq :]
