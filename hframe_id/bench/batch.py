@@ -18,6 +18,7 @@ of one run are the result.
 from __future__ import annotations
 
 import contextlib
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -67,6 +68,7 @@ def _dask(jobs, workers: int, out: Path) -> tuple[float, float]:
 
 def run() -> None:
     heading(f"Batch fits on Dask ({RIGS * WEEKS} fits: {RIGS} rigs x {WEEKS} weeks)")
+    load = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="hframe-bench-batch-") as tmp:
         root = Path(tmp)
         start = time.perf_counter()
@@ -89,3 +91,7 @@ def run() -> None:
     speedup = times[1] / times[2]
     print(f"Dask 1 worker vs sequential: {100 * overhead:+.1f} % (target <= +10 %)")
     print(f"2 workers vs 1 worker: {speedup:.2f}x (target >= 1.7x)")
+    print(
+        f"load average (1 min) at start {load[0]:.1f}, at end {os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} CPUs: other processes take cores from the second worker"
+    )
