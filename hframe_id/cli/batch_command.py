@@ -12,7 +12,7 @@ from hframe_id.errors import OptionError
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "batch",
-        help="fit every entry of a manifest on Dask; one Parquet row per fit",
+        help="fit every entry of a manifest on Dask into Parquet",
         description=(
             "Fit every entry of a manifest (YAML or CSV: rig, time, recordings, model, "
             "initial, free; docs/fleet.md) on a Dask cluster and store one row per fit in a "

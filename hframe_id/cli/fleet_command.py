@@ -14,7 +14,7 @@ from hframe_id.errors import OptionError
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "fleet",
-        help="synthetic fleets and drift reports over a batch's results",
+        help="synthetic fleets; rig histories and drift flags",
         description="Rig histories over time: 'make' records a synthetic fleet with the sim "
         "rig, 'report' plots each parameter per rig and flags drift (docs/fleet.md).",
     )
