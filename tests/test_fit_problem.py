@@ -132,3 +132,15 @@ def test_fit_recordings_raises_before_solving(hframe, recording):
         fit_recordings([], hframe)
     with pytest.raises(FitError, match="did you mean"):
         fit_recordings([recording], hframe, FitOptions(free=("tau_cm1",)))
+
+
+def test_each_component_reads_its_own_options():
+    """The transcription and the problem builder get frozen parts of the flat FitOptions."""
+    from hframe_id.fitting.options import ProblemOptions, TranscriptionOptions
+
+    options = FitOptions(shooting_interval=25, continuity="none", bound_factor=3.0, threads=1)
+    assert options.transcription_options == TranscriptionOptions(25, "none", 1.5, 200, 1)
+    assert isinstance(options.problem_options, ProblemOptions)
+    assert options.problem_options.bound_factor == 3.0
+    assert options.solver_options.max_iterations == options.max_iterations
+    assert options.statistics_options.confidence == 0.95

@@ -113,7 +113,7 @@ def equation_error_start(
     us = np.hstack([d[2] for d in data])
     mask = np.hstack([d[3] for d in data]).astype(float)  # (nq, n)
     n = xs.shape[1]
-    mapped = fn.map(n, "thread", problem.options.threads)
+    mapped = fn.map(n, "thread", problem.options.transcription_options.threads)
     # Inputs and outputs bound once to numpy arrays (column-major: an (r, c) matrix is a
     # C-order (c, r) array): converting DMs costs twice the evaluation itself.
     buffer, run = mapped.buffer()

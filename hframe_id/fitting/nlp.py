@@ -162,7 +162,7 @@ class _Transcription:
         p_fixed = problem.p_initial.copy()
         p_fixed[free] = 0.0
         p = ca.DM(p_fixed) + ca.DM(select_free) @ p_free
-        threads = problem.options.threads
+        threads = ms.transcription.threads
         inputs = (ca.DM(ms.inputs.reshape(w * m, ms.nu).T), p, ca.DM(smoothing), ms.dt / n_sub)
 
         # Residuals, ordered (window, sample, channel) like ms.weight; valid ones only.

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from hframe_id.errors import OptionError
@@ -46,8 +46,64 @@ def _positive(name: str, value: Any, integer: bool = False) -> None:
 
 
 @dataclass(frozen=True)
+class ProblemOptions:
+    """What is estimated, from what: the parts of ``FitOptions`` that ``build_problem`` reads
+    (free set, bounds, channel weights and latencies, Coulomb smoothing)."""
+
+    free: tuple[str, ...] | None
+    fix: tuple[str, ...]
+    bounds: Mapping[str, tuple[float, float]]
+    bound_factor: float
+    channel_std: Mapping[str, float]
+    latency_samples: Mapping[str, int]
+    smoothing: tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class TranscriptionOptions:
+    """How the problem is cut into shooting windows and integrated: the parts of
+    ``FitOptions`` that ``MultipleShooting`` reads."""
+
+    shooting_interval: int
+    continuity: str
+    substep_safety: float
+    max_substeps: int
+    threads: int
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """How the all-window stages are solved: which solver, iterations and tolerances."""
+
+    solver: str
+    max_iterations: int
+    step_tol: float
+    defect_tol: float
+
+
+@dataclass(frozen=True)
+class StatisticsOptions:
+    """How the intervals are computed and judged."""
+
+    uncertainty: str
+    confidence: float
+    consider: Mapping[str, float] | None
+    identifiability_threshold: float
+
+
+def _part(options: Any, kind: type) -> Any:
+    """The ``kind`` options (a dataclass whose fields are a subset of ``options``')."""
+    return kind(**{f.name: getattr(options, f.name) for f in fields(kind)})
+
+
+@dataclass(frozen=True)
 class FitOptions:
-    """How to fit.
+    """How to fit: one flat set of options for users, validated together.
+
+    The parts each component reads are its own frozen options (``problem_options``,
+    ``transcription_options``, ``solver_options``, ``statistics_options``): the problem
+    builder, the transcription, the solvers and the statistics see only theirs; the rest
+    (noise weighting, first stages, pre-pass, misfit limit, progress) is the fit's strategy.
 
     Attributes
     ----------
@@ -271,6 +327,22 @@ class FitOptions:
             raise OptionError(f"verbose must be 0, 1 or 2, got {self.verbose!r}")
         if self.progress is not None and not callable(self.progress):
             raise OptionError("progress must be callable (FitProgress) -> None")
+
+    @property
+    def problem_options(self) -> ProblemOptions:
+        return _part(self, ProblemOptions)
+
+    @property
+    def transcription_options(self) -> TranscriptionOptions:
+        return _part(self, TranscriptionOptions)
+
+    @property
+    def solver_options(self) -> SolverOptions:
+        return _part(self, SolverOptions)
+
+    @property
+    def statistics_options(self) -> StatisticsOptions:
+        return _part(self, StatisticsOptions)
 
     def describe(self) -> dict[str, Any]:
         """The options as plain data for a fit's provenance."""

@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.options import FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -142,7 +142,9 @@ def default_free(model: Model) -> list[str]:
     return [name for name in model.parameter_names if name in free]
 
 
-def resolve_free(model: Model, options: FitOptions) -> list[str]:
+def resolve_free(model: Model, options: ProblemOptions) -> list[str]:
+    """The free parameter names: ``options.free`` (names or patterns; default the declaration's
+    free set) without ``options.fix``; ``FitError`` if none are left."""
     names = list(model.parameter_names)
     free = _expand(options.free, names, "free") if options.free else default_free(model)
     fixed = _expand(options.fix, names, "fix") if options.fix else []
@@ -292,6 +294,7 @@ def build_problem(
     unknown free parameter names (suggesting the nearest), a free parameter at zero (log
     scale), bounds excluding the initial value, too few valid samples.
     """
+    wanted = options.problem_options  # what this builder reads; ``options`` is kept whole
     recordings = list(recordings)
     if not recordings:
         raise FitError("no recordings to fit")
@@ -315,8 +318,8 @@ def build_problem(
             )
     p0 = model.parameter_vector(initial.values)
     names = list(model.parameter_names)
-    free_names = resolve_free(model, options)
-    for name in options.bounds:
+    free_names = resolve_free(model, wanted)
+    for name in wanted.bounds:
         if name not in names:
             raise FitError(f"bounds: unknown parameter {name!r}{_suggest(name, names)}")
         if name not in free_names:
@@ -332,11 +335,11 @@ def build_problem(
             )
         scale = abs(value) if value != 0 else 1.0
         default = (
-            (value - options.bound_factor * scale, value + options.bound_factor * scale)
+            (value - wanted.bound_factor * scale, value + wanted.bound_factor * scale)
             if signed
-            else (value / options.bound_factor, value * options.bound_factor)
+            else (value / wanted.bound_factor, value * wanted.bound_factor)
         )
-        low, high = options.bounds.get(name, default)
+        low, high = wanted.bounds.get(name, default)
         if not signed and not low > 0:
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}]: a parameter fitted in log scale needs "
@@ -355,23 +358,23 @@ def build_problem(
     free = tuple(names.index(n) for n in free_names)
 
     outputs = [s.name for s in model.outputs]
-    for name in options.channel_std:
+    for name in wanted.channel_std:
         if name not in outputs:
             raise FitError(
                 f"channel_std: unknown output {name!r}{_suggest(name, outputs)}; "
                 f"valid: {', '.join(outputs)}"
             )
-    for name in options.latency_samples:
+    for name in wanted.latency_samples:
         if name not in outputs:
             raise FitError(
                 f"latency_samples: unknown output {name!r}{_suggest(name, outputs)}; "
                 f"valid: {', '.join(outputs)}"
             )
-    latency = dict(options.latency_samples)
+    latency = dict(wanted.latency_samples)
     experiments = tuple(_prepare(rec, model, latency) for rec in recordings)
     std = np.array(
         [
-            options.channel_std.get(name) or default_channel_std(recordings[0], name)
+            wanted.channel_std.get(name) or default_channel_std(recordings[0], name)
             for name in outputs
         ]
     )
@@ -389,7 +392,7 @@ def build_problem(
             f"too few valid samples: {n_valid} output values for {n_unknown} unknowns "
             f"(need >= {MIN_VALID_PER_UNKNOWN} per unknown)"
         )
-    smoothing = options.smoothing or model.options.smoothing
+    smoothing = wanted.smoothing or model.options.smoothing
     return FitProblem(
         model=model,
         initial=initial,

@@ -33,6 +33,7 @@ from hframe_id.fitting.kernel import (
     compiled_windows,
     window_function,
 )
+from hframe_id.fitting.options import TranscriptionOptions
 from hframe_id.fitting.problem import FitProblem, output_matrix, rigid_modes
 from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT
 
@@ -64,10 +65,18 @@ class Evaluation:
 class MultipleShooting:
     """The windows, data layout and evaluation of one problem."""
 
-    def __init__(self, problem: FitProblem, interval: int | None = None):
+    def __init__(
+        self,
+        problem: FitProblem,
+        interval: int | None = None,
+        transcription: TranscriptionOptions | None = None,
+    ):
+        """``transcription``: windows, continuity, substeps, threads (default: the problem's
+        ``FitOptions.transcription_options``); ``interval`` overrides its window length."""
         self.problem = problem
+        self.transcription = transcription or problem.options.transcription_options
         self.model = problem.model
-        self.m = int(interval or problem.options.shooting_interval)
+        self.m = int(interval or self.transcription.shooting_interval)
         self.dt = problem.sample_period_s
         self.nx = self.model.n_states
         self.nq = self.nx // 2
@@ -80,7 +89,7 @@ class MultipleShooting:
         self._output_index = np.argmax(self.c, axis=1) if unit_rows.all() else None
         #: State rows whose sensitivities the residuals need (all where C mixes states).
         self._sens_rows = self._output_index if unit_rows.all() else np.arange(self.nx)
-        self.threads = problem.options.threads
+        self.threads = self.transcription.threads
         m = self.m
         exp_of, start, length = [], [], []
         for e, exp in enumerate(problem.experiments):
@@ -108,7 +117,7 @@ class MultipleShooting:
         # Windows i and i + 1 of the same experiment are joined by continuity (unless the
         # options ask for independent horizons: ``FitOptions.continuity``).
         self.linked = (self.window_experiment[:-1] == self.window_experiment[1:]) & (
-            problem.options.continuity == "exact"
+            self.transcription.continuity == "exact"
         )
         self.window_index_in_experiment = self.window_start // m
         self.first_window = np.array(
@@ -264,7 +273,7 @@ class MultipleShooting:
     def substep_plan(self, p: np.ndarray, smoothing: tuple[float, float]) -> dict:
         """Fast and stiff substep counts and, per velocity state, the speed below which a
         window needs the stiff count."""
-        options = self.problem.options
+        options = self.transcription
         jac = lambda x: self._jac_x(x, p, ca.DM(smoothing))  # noqa: E731
         vs = np.array(
             [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.model.coordinates]
