@@ -105,10 +105,10 @@ def mismatch_statement(result: FitResult) -> str | None:
     if noise is None or noise["method"] != "estimated":
         return None
     ratios = [c["residual_rms_sensor_std"] for c in noise["channels"].values()]
+    span = f"{ratios[0]:.3g}" if len(ratios) == 1 else f"{min(ratios):.3g} to {max(ratios):.3g}"
     return (
         "The model does not follow the data at the sensors' noise level "
-        f"(residual rms {min(ratios):.3g} to {max(ratios):.3g} x the sensor std, per channel "
-        "below). The channels were weighted by noise levels estimated from the residuals "
+        f"(residual rms {span} x the sensor std, per channel below). The channels were weighted by noise levels estimated from the residuals "
         f"({noise['rounds']} round(s)) instead of the sensor specifications; the residuals "
         "are model error more than noise."
     )
