@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.outputs import check_dir, check_file
 from hframe_id.control.trajectory import (
     SQUARE_F_A,
     SQUARE_SIDE_M,
@@ -138,10 +139,10 @@ def _controller(args: argparse.Namespace) -> ControllerOptions:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    if args.csv is not None and not args.csv.parent.exists():
-        raise OptionError(f"{args.csv.parent} does not exist")
-    if args.plot is not None and args.plot.exists() and not args.plot.is_dir():
-        raise OptionError(f"--plot {args.plot} exists and is not a directory")
+    if args.csv is not None:
+        check_file(args.csv, "--csv")
+    if args.plot is not None:
+        check_dir(args.plot, "--plot")
 
 
 def _signals(result) -> pd.DataFrame:

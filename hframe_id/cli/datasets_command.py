@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import LogFormatError
 
 
@@ -52,7 +53,7 @@ def run_make(args: argparse.Namespace) -> int:
     def report(spec, summary) -> None:
         print(f"{spec.file:<20} {summary.samples} samples, truth {spec.truth}, seed {spec.seed}")
 
-    out = args.out or Path("datasets/realistic" if args.realistic else "datasets")
+    out = check_dir(args.out or ("datasets/realistic" if args.realistic else "datasets"), "--out")
     manifest = make_datasets(out, args.only, progress=report, collection=_collection(args))
     print(f"manifest             {manifest}")
     return 0

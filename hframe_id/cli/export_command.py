@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from hframe_id.cli.outputs import check_file
 from hframe_id.errors import OptionError
 
 
@@ -37,6 +38,8 @@ def run(args: argparse.Namespace) -> int:
     fmt = export_format(args.format)
     if fmt.binary and not args.out:
         raise OptionError(f"format {fmt.name} writes a binary {fmt.suffix} file: give --out PATH")
+    if args.out:
+        check_file(args.out, "--out")
     data = render(load_parameter_file(args.file), fmt)
     if args.out:
         path = write_atomic(args.out, data, overwrite=args.force)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import sys
 import time
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting.options import (
     CONTINUITY,
@@ -282,20 +282,6 @@ def resolve_dataset(name: str) -> Path:
     raise FitError(f"{name}: no such recording (also looked in {looked})")
 
 
-def check_out_dir(out_dir: Path) -> None:
-    """Fail before any solving if ``out_dir`` cannot hold the results (not a directory, or
-    its nearest existing ancestor is not a writable directory); creates nothing."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise FitError(f"--out-dir {out_dir}: exists and is not a directory")
-    ancestor = out_dir
-    while not ancestor.exists():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise FitError(f"--out-dir {out_dir}: {ancestor} is not a directory")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise FitError(f"--out-dir {out_dir}: {ancestor} is not writable")
-
-
 def _options(args: argparse.Namespace) -> FitOptions:
     from hframe_id.models.declaration import FIT_DEFAULT_KEYS
 
@@ -456,8 +442,7 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.recordings import read_recording
 
     options = _options(args)
-    out_dir = Path(args.out_dir)
-    check_out_dir(out_dir)
+    out_dir = check_dir(args.out_dir, "--out-dir")
     model = args.model or (args.loaded_models[0] if len(args.loaded_models) == 1 else None)
     if model:
         # A start of another variant fails before the recordings are read.

@@ -6,6 +6,7 @@ import argparse
 import datetime as dt
 import sys
 
+from hframe_id.cli.outputs import check_file
 from hframe_id.errors import OptionError
 from hframe_id.recordings.import_spec import ROLES, ColumnMap, ImportSpec
 from hframe_id.recordings.importer import import_recording
@@ -128,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except OptionError as err:
         raise OptionError(f"{args.file}: {err}") from None
+    check_file(args.out, "--out", make_parents=True)
     result = import_recording(args.file, args.out, spec, overwrite=args.force)
     channels = result.channels
     print(

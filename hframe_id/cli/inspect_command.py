@@ -7,6 +7,8 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.outputs import check_file
+
 if TYPE_CHECKING:  # the reader (NumPy, MCAP) is imported when a file is inspected
     from hframe_id.recordings.recording import Recording
 
@@ -43,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
         print(line)
     if args.plot is not None:
         target = args.recording.with_suffix(".png") if args.plot is True else Path(args.plot)
+        check_file(target, "--plot", make_parents=True)
         plot(recording, target)
         print(f"plot           {target}")
     return 0

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from hframe_id.cli.outputs import check_file
 from hframe_id.errors import OptionError
 
 
@@ -190,6 +191,7 @@ def _progress_display(stream):
 
 
 def run(args: argparse.Namespace) -> int:
+    check_file(args.out, "--out", make_parents=True)
     from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
     from hframe_id.recordings.writer import Attachment
     from hframe_id.rig.logger import RunOptions, run_experiment

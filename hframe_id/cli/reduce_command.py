@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hframe_id.cli.outputs import check_file
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -23,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.parameters import load_parameter_file, save_parameter_file
     from hframe_id.parameters.reduce import reduce_to_hframe8
 
+    check_file(args.out, "--out", make_parents=True)
     reduced = reduce_to_hframe8(load_parameter_file(args.file))
     path = save_parameter_file(reduced, args.out, overwrite=args.force)
     print(f"wrote {path} ({reduced.variant}, reduced from {args.file})")

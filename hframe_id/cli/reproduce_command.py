@@ -11,7 +11,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from hframe_id.errors import OptionError
+from hframe_id.cli.outputs import check_dir
 
 DEFAULT_PARAMS = Path("models/hframe-8-table4.2.yaml")
 
@@ -44,8 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     params = load_parameter_file(args.params)
     check_hframe(build_model(params.variant))
-    if args.out.exists() and not args.out.is_dir():
-        raise OptionError(f"--out {args.out} exists and is not a directory")
+    check_dir(args.out, "--out")
     rep = reproduce(params, sensitivity=not args.no_sensitivity)
     command = "hframe-id " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else ""
     report = write_report(rep, args.out, command)

@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.outputs import check_dir, check_file
 from hframe_id.errors import OptionError
 
 if TYPE_CHECKING:  # imported when a simulation runs, not for --help
@@ -152,15 +153,16 @@ def _frame(result: SimulationResult) -> pd.DataFrame:
 
 
 def _check_writable(args: argparse.Namespace) -> None:
-    for path in (args.out, args.mcap):
+    for option, path in (("--out", args.out), ("--mcap", args.mcap)):
         if path is None:
             continue
         if path.exists() and not args.overwrite:
             raise OptionError(f"{path} exists; pass --overwrite to replace it")
-        if not path.parent.exists():
-            raise OptionError(f"{path.parent} does not exist")
+        check_file(path, option)
     if args.mcap is not None and args.mcap.suffix != ".mcap":
         raise OptionError(f"--mcap needs a .mcap file name, got {args.mcap}")
+    if args.plot is not None:
+        check_dir(args.plot, "--plot")
 
 
 def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source: str) -> str:

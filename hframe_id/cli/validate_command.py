@@ -7,10 +7,10 @@ import argparse
 import json
 import sys
 import warnings
-from pathlib import Path
 
-from hframe_id.cli.fit_command import check_out_dir, resolve_dataset
-from hframe_id.errors import FitError, OptionError
+from hframe_id.cli.fit_command import resolve_dataset
+from hframe_id.cli.outputs import check_dir
+from hframe_id.errors import OptionError
 
 #: The defaults of ``ValidationOptions``, stated in --help without importing the validation
 #: (SciPy, CasADi); tests/test_cli_help.py checks that they agree.
@@ -92,12 +92,7 @@ def run(args: argparse.Namespace) -> int:
     options = ValidationOptions(**given)
     parameter_sets = [load_parameter_file(path) for path in [args.fit, *args.params]]
     recordings = _read(args.recordings)
-    plot_dir = Path(args.plot) if args.plot else None
-    if plot_dir is not None:
-        try:
-            check_out_dir(plot_dir)
-        except FitError as err:
-            raise OptionError(str(err).replace("--out-dir", "--plot")) from None
+    plot_dir = check_dir(args.plot, "--plot") if args.plot else None
     result = validate(parameter_sets, recordings, options)
     written = []
     if plot_dir is not None:

@@ -162,6 +162,30 @@ def _values_from_keys(variant: str, raw: Any, where: str) -> dict[str, float]:
     return values
 
 
+#: Parameter files are a few kB (a fit's, with its correlation matrix, tens of kB); anything
+#: this large is not one, and reading it whole would only waste memory.
+MAX_FILE_BYTES = 10 * 2**20
+
+
+def read_text(path: Path, kind: str = "parameter file") -> str:
+    """The UTF-8 text of a parameter or plant file (``kind``, for the messages);
+    ``ParameterFileError`` for a binary, non-UTF-8 or oversized file, ``OSError`` if
+    it cannot be read at all."""
+    with path.open("rb") as stream:
+        data = stream.read(MAX_FILE_BYTES + 1)
+    if len(data) > MAX_FILE_BYTES:
+        raise ParameterFileError(f"{path}: larger than {MAX_FILE_BYTES // 2**20} MB; not a {kind}")
+    if b"\0" in data:
+        raise ParameterFileError(f"{path}: binary data, not a {kind} (YAML text)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ParameterFileError(
+            f"{path}: not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}); "
+            f"save the {kind} as UTF-8"
+        ) from None
+
+
 def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> ParameterSet:
     """Load and validate a parameter file.
 
@@ -173,7 +197,7 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     path = Path(path)
     where = str(path)
     try:
-        text = path.read_text()
+        text = read_text(path)
     except FileNotFoundError:
         raise ParameterFileError(f"{where}: no such parameter file") from None
     except OSError as err:

@@ -165,7 +165,7 @@ def _read_mat(path: Path) -> SourceTable:
         variables = scipy.io.loadmat(path)
     except NotImplementedError:  # scipy's answer to a v7.3 file
         raise SourceDataError(f"{path}: {_V73}") from None
-    except (ValueError, TypeError, OSError) as err:
+    except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as err:
         raise SourceDataError(f"{path}: not a readable MATLAB .mat file ({err})") from None
     raw = {k: v for k, v in variables.items() if not k.startswith("__")}
     scalars = {

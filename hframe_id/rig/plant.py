@@ -47,7 +47,7 @@ from hframe_id.atomic import replace_atomically
 from hframe_id.errors import HframeIdError, ModelError, ParameterFileError
 from hframe_id.models import Model, ModelOptions, build_model
 from hframe_id.parameters import ParameterSet, load_parameter_file
-from hframe_id.parameters.files import check_header, suggest, to_document
+from hframe_id.parameters.files import check_header, read_text, suggest, to_document
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.simulation.realistic import PlantConstants, realistic_substeps
 
@@ -266,7 +266,7 @@ def load_plant_file(path: str | os.PathLike) -> Plant:
     """Load and validate a plant file (``ParameterFileError`` naming the file and field)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = read_text(path, "plant file")
     except FileNotFoundError:
         raise ParameterFileError(f"{path}: no such plant file") from None
     except OSError as err:
