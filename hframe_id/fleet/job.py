@@ -21,12 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from hframe_id.fitting import FitOptions, FitResult, fit_recordings
-from hframe_id.fitting.kernel import cache_dir, compiled_windows
+from hframe_id.fitting.kernel import compiled_windows
 from hframe_id.fitting.output import write_parameter_file
 from hframe_id.fitting.problem import resolve_free
 from hframe_id.fitting.report import write_report
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.models import build_model, declaration
+from hframe_id.native import cache_directory
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
 
@@ -86,17 +87,17 @@ def base_row(job: FitJob, key: str, digests: list[str]) -> dict[str, Any]:
     }
 
 
-def warm_up(jobs: list[FitJob]) -> str:
-    """Derive the models and build (or load from the disk cache) the compiled window kernels
-    of ``jobs``' models and free sets in this process, so that no task pays for them; returns
-    the process id and the kernel cache folder (``HFRAME_ID_CACHE``)."""
+def warm_up(jobs: list[FitJob]) -> None:
+    """Derive the models and build (or load from the disk cache, ``HFRAME_ID_CACHE``) the
+    compiled window kernels of ``jobs``' models and free sets in this process, so that no
+    task pays for them."""
     for model_name, free in sorted({(job.model, job.free or ()) for job in jobs}):
         model = build_model(model_name)
         options = batch_options_for(model_name, free or None)
         names = resolve_free(model, options)
         compiled_windows(model, tuple(model.parameter_names.index(n) for n in names))
         compiled_windows(model, None)
-    return f"pid {os.getpid()}, kernel cache {cache_dir()}"
+    return f"pid {os.getpid()}, kernel cache {cache_directory()}"
 
 
 def run_job(
