@@ -27,7 +27,6 @@ from hframe_id.fitting.problem import resolve_free
 from hframe_id.fitting.report import write_report
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.models import build_model, declaration
-from hframe_id.native import cache_directory
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
 
@@ -97,7 +96,6 @@ def warm_up(jobs: list[FitJob]) -> None:
         names = resolve_free(model, options)
         compiled_windows(model, tuple(model.parameter_names.index(n) for n in names))
         compiled_windows(model, None)
-    return f"pid {os.getpid()}, kernel cache {cache_directory()}"
 
 
 def run_job(
