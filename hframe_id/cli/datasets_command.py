@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from hframe_id.cli.json_output import emit
 from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import LogFormatError
 
@@ -35,9 +36,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     make.set_defaults(handler=run_make)
     listing = actions.add_parser("list", help="list the datasets and what they are")
     listing.add_argument("--realistic", action="store_true", help="the realistic-plant datasets")
+    listing.add_argument("--json", action="store_true", help="print one JSON object")
     listing.set_defaults(handler=run_list)
     verify = actions.add_parser("verify", help="check files against the manifest's sha256")
     verify.add_argument("--dir", type=Path, default=Path("datasets"), help="folder (datasets)")
+    verify.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (exit status 2 still when a file does not match)",
+    )
     verify.set_defaults(handler=run_verify)
 
 
@@ -61,9 +68,20 @@ def run_make(args: argparse.Namespace) -> int:
 
 def run_list(args: argparse.Namespace) -> int:
     collection = _collection(args)
-    for spec in collection.datasets:
-        truth = collection.truths[spec.truth].file
-        print(f"{spec.file:<20} {truth:<30} seed {spec.seed:<5} {spec.description}")
+    rows = [
+        {
+            "file": spec.file,
+            "truth": collection.truths[spec.truth].file,
+            "seed": spec.seed,
+            "description": spec.description,
+        }
+        for spec in collection.datasets
+    ]
+    if args.json:
+        emit("datasets list", {"realistic": args.realistic, "datasets": rows})
+        return 0
+    for row in rows:
+        print(f"{row['file']:<20} {row['truth']:<30} seed {row['seed']:<5} {row['description']}")
     return 0
 
 
@@ -71,6 +89,9 @@ def run_verify(args: argparse.Namespace) -> int:
     from hframe_id.rig.datasets import verify_datasets
 
     problems = verify_datasets(args.dir)
+    if args.json:
+        emit("datasets verify", {"dir": args.dir, "ok": not problems, "problems": problems})
+        return 2 if problems else 0
     if problems:
         raise LogFormatError("; ".join(problems))
     print(f"{args.dir}: every file matches the manifest")

@@ -438,6 +438,7 @@ def _write_outputs(
 
 def run(args: argparse.Namespace) -> int:
     from hframe_id.fitting import fit_recordings
+    from hframe_id.fitting.report import incomplete_recordings
     from hframe_id.fitting.summary_json import fit_summary
     from hframe_id.recordings import read_recording
 
@@ -475,6 +476,8 @@ def run(args: argparse.Namespace) -> int:
     )
     human = sys.stderr if args.json else sys.stdout
     print(result.summary(), file=human)
+    for line in incomplete_recordings(recordings):
+        print(f"incomplete recording: {line}", file=human)
     if held := result.held_statement():
         print(held, file=human)
     _print_mismatch(result, human)

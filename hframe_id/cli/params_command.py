@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.json_output import emit
 from hframe_id.errors import HframeIdError
 
 if TYPE_CHECKING:
@@ -26,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Print the header and every parameter (name, SI unit, value, description).",
     )
     show.add_argument("file", metavar="FILE", help="parameter file (YAML)")
+    show.add_argument(
+        "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
+    )
     show.set_defaults(handler=run_show)
     check = actions.add_parser(
         "check",
@@ -33,6 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Load and validate each file strictly; print one line per file.",
     )
     check.add_argument("files", metavar="FILE", nargs="+", help="parameter file(s) (YAML)")
+    check.add_argument(
+        "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
+    )
     check.set_defaults(handler=run_check)
 
 
@@ -73,20 +80,34 @@ def format_table(params: ParameterSet) -> str:
 def run_show(args: argparse.Namespace) -> int:
     from hframe_id.parameters import load_parameter_file
 
-    print(format_table(load_parameter_file(args.file)))
+    params = load_parameter_file(args.file)
+    if args.json:
+        from hframe_id.analysis.export import parameters_document
+
+        emit("params show", parameters_document(params))
+    else:
+        print(format_table(params))
     return 0
 
 
 def run_check(args: argparse.Namespace) -> int:
     from hframe_id.parameters import load_parameter_file
 
-    failed = 0
+    files = []
     for path in args.files:
         try:
             params = load_parameter_file(path)
         except HframeIdError as err:
-            print(f"hframe-id: error: {err}", file=sys.stderr)
-            failed += 1
+            files.append({"file": path, "ok": False, "error": str(err)})
+            if not args.json:
+                print(f"hframe-id: error: {err}", file=sys.stderr)
             continue
-        print(f"{path}: ok ({params.variant}, {len(params.values)} parameters)")
+        files.append(
+            {"file": path, "ok": True, "model": params.variant, "parameters": len(params.values)}
+        )
+        if not args.json:
+            print(f"{path}: ok ({params.variant}, {len(params.values)} parameters)")
+    failed = sum(not f["ok"] for f in files)
+    if args.json:
+        emit("params check", {"ok": not failed, "files": files})
     return 2 if failed else 0

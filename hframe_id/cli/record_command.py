@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
+from hframe_id.cli.json_output import emit
 from hframe_id.cli.outputs import check_file
 from hframe_id.errors import OptionError
 
@@ -91,6 +93,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     out.add_argument("--operator", help="who runs the experiment (default: login name)")
     out.add_argument("--notes", default="", help="free text for the experiment metadata")
     out.add_argument("--quiet", action="store_true", help="no progress display")
+    out.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (docs/cli-json.md) instead of the summary",
+    )
     parser.set_defaults(handler=run)
 
 
@@ -190,6 +197,35 @@ def _progress_display(stream):
     return show
 
 
+def clamped(table, names: tuple[str, ...], low: float, high: float) -> list[dict]:
+    """Per input whose commanded voltages leave the DAC range [low, high] V: its name, the
+    requested extreme and the samples the rig clamps."""
+    import numpy as np
+
+    found = []
+    for j, name in enumerate(names):
+        outside = (table[:, j] < low) | (table[:, j] > high)
+        if outside.any():
+            worst = table[outside, j][np.argmax(np.abs(table[outside, j]))]
+            found.append(
+                {
+                    "input": name,
+                    "requested_V": float(worst),
+                    "applied_V": float(np.clip(worst, low, high)),
+                    "samples": int(outside.sum()),
+                }
+            )
+    return found
+
+
+def _clamp_sentence(clamp: dict, low: float, high: float) -> str:
+    return (
+        f"{clamp['input']} asks for {clamp['requested_V']:g} V, outside the DAC range "
+        f"[{low:g}, {high:g}] V: clamped to {clamp['applied_V']:g} V in {clamp['samples']} "
+        "sample(s)"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     check_file(args.out, "--out", make_parents=True)
     from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
@@ -199,6 +235,10 @@ def run(args: argparse.Namespace) -> int:
     rig = make_rig(args)
     try:
         protocol = _protocol(args, len(rig.info.inputs))
+        low, high = rig.info.sensors.dac_min_v, rig.info.sensors.dac_max_v
+        clamps = clamped(protocol.table(rig.info.sample_period_s), rig.info.inputs, low, high)
+        for clamp in clamps:
+            print(f"hframe-id: warning: {_clamp_sentence(clamp, low, high)}", file=sys.stderr)
         attachments = []
         if args.protocol == "csv":
             attachments.append(
@@ -221,5 +261,22 @@ def run(args: argparse.Namespace) -> int:
         rig.close()
     if show is not None and summary.samples < summary.planned_samples:
         sys.stderr.write("\n")
-    print("\n".join(summary.lines()))
+    planned = summary.planned_samples
+    lost_share = (planned - summary.samples) / planned if planned else 0.0
+    if args.json:
+        emit(
+            "record",
+            {
+                **{f.name: getattr(summary, f.name) for f in dataclasses.fields(summary)},
+                "lost_share": lost_share,
+                "events": [{"kind": k, "reason": r} for k, r in summary.events],
+                "clamped": clamps,
+            },
+        )
+        return 1 if summary.aborted else 0
+    lines = summary.lines()
+    if summary.samples < planned:
+        lines.append(f"not recorded   {100 * lost_share:.1f} % of the planned samples")
+    lines += [f"clamped        {_clamp_sentence(clamp, low, high)}" for clamp in clamps]
+    print("\n".join(lines))
     return 1 if summary.aborted else 0

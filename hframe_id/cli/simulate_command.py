@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.json_output import emit
 from hframe_id.cli.outputs import check_dir, check_file
 from hframe_id.errors import OptionError
 
@@ -83,6 +84,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="--mcap: sensor noise seed (0)")
     parser.add_argument("--plot", type=Path, metavar="DIR", help="write open_loop.png here")
     parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
+    )
     parser.set_defaults(handler=run)
 
 
@@ -165,7 +169,8 @@ def _check_writable(args: argparse.Namespace) -> None:
         check_dir(args.plot, "--plot")
 
 
-def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source: str) -> str:
+def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source: str):
+    """Record the inputs with the sim rig to --mcap; the logger's ``RunSummary``."""
     from hframe_id.rig.logger import RunOptions, run_experiment
     from hframe_id.rig.protocols import SequenceProtocol
     from hframe_id.rig.sim import SimRig
@@ -188,8 +193,7 @@ def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source:
         )
     finally:
         rig.close()
-    state = f"aborted: {summary.abort_reason}" if summary.aborted else "complete"
-    return f"wrote {args.mcap} ({summary.samples} samples, sim rig, seed {args.seed}, {state})"
+    return summary
 
 
 def _load_plant(args: argparse.Namespace):
@@ -249,13 +253,52 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("the simulation diverged (non-finite states); try more --substeps")
     _frame(result).to_csv(args.out, index=False)
     law = "plant's" if args.plant else f"{args.friction or 'smooth'}"
-    print(f"wrote {args.out} ({table.shape[0]} samples of {dt * 1e3:g} ms, {model.variant}, "
-          f"{law} friction, {source})")  # fmt: skip
+    report = {
+        "csv": args.out,
+        "samples": table.shape[0],
+        "sample_time_s": dt,
+        "model": model.variant,
+        "friction": law,
+        "source": source,
+        "substeps": n,
+        "outputs": [
+            {
+                "name": signal.name,
+                "unit": signal.unit,
+                "final": result.outputs[-1, j],
+                "min": result.outputs[:, j].min(),
+                "max": result.outputs[:, j].max(),
+            }
+            for j, signal in enumerate(model.outputs)
+        ],
+        "mcap": None,
+        "plot": None,
+    }
+    lines = [
+        f"wrote {args.out} ({table.shape[0]} samples of {dt * 1e3:g} ms, {model.variant}, "
+        f"{law} friction, {source})"
+    ]
     if args.mcap is not None:
-        print(_record(args, plant, table, dt, n, source))
+        summary = _record(args, plant, table, dt, n, source)
+        state = f"aborted: {summary.abort_reason}" if summary.aborted else "complete"
+        report["mcap"] = {
+            "file": args.mcap,
+            "samples": summary.samples,
+            "seed": args.seed,
+            "aborted": summary.aborted,
+            "abort_reason": summary.abort_reason or None,
+        }
+        lines.append(
+            f"wrote {args.mcap} ({summary.samples} samples, sim rig, seed {args.seed}, {state})"
+        )
     if args.plot is not None:
         from hframe_id.simulation.plots import write_open_loop_plot
 
         title = f"{model.variant}: {source}"
-        print(f"wrote {write_open_loop_plot(result, args.plot / 'open_loop.png', title)}")
+        report["plot"] = write_open_loop_plot(result, args.plot / "open_loop.png", title)
+        lines.append(f"wrote {report['plot']}")
+    if args.json:
+        emit("simulate", report)
+    else:
+        print("\n".join(lines))
     return 0

@@ -108,7 +108,8 @@ def mismatch_statement(result: FitResult) -> str | None:
     span = f"{ratios[0]:.3g}" if len(ratios) == 1 else f"{min(ratios):.3g} to {max(ratios):.3g}"
     return (
         "The model does not follow the data at the sensors' noise level "
-        f"(residual rms {span} x the sensor std, per channel below). The channels were weighted by noise levels estimated from the residuals "
+        f"(residual rms {span} x the sensor std, per channel below). The channels were "
+        "weighted by noise levels estimated from the residuals "
         f"({noise['rounds']} round(s)) instead of the sensor specifications; the residuals "
         "are model error more than noise."
     )
@@ -350,12 +351,26 @@ def _correlation_lines(result: FitResult, plots: Path | None, folder: str) -> li
     return [*lines, *correlation_lines(result), ""]
 
 
+def incomplete_recordings(recordings: list[Recording]) -> list[str]:
+    """A sentence per recording that is not its complete run (salvaged, aborted, samples
+    lost), saying how many of the planned samples were fitted."""
+    from hframe_id.recordings.completeness import completeness
+
+    return [
+        f"{rec.name()}: {statement}"
+        for rec in recordings
+        if (statement := completeness(rec).statement())
+    ]
+
+
 def _status_lines(result: FitResult, recordings: list[Recording], parameter_file) -> list[str]:
     status = "success" if result.success else "**FAILED**"
+    incomplete = [f"- incomplete recording: {line}" for line in incomplete_recordings(recordings)]
     return [
         f"- status: {status} (solver: {result.message})",
         f"- model: {result.variant}; {len(recordings)} experiment(s): "
         + ", ".join(rec.name() for rec in recordings),
+        *incomplete,
         f"- cost {result.cost:.6g} (residual rms {result.residual_rms:.3g} x the noise "
         f"levels weighed with), {result.iterations} iterations, "
         f"{result.wall_time_s:.2f} s wall time",
