@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def format_table(params: ParameterSet) -> str:
     """The header lines and the parameter table of a parameter set."""
-    from hframe_id.analysis.export import parameter_rows
+    from hframe_id.models import parameter_specs
 
     header = [
         ("file", str(params.path) if params.path else "-"),
@@ -59,9 +59,10 @@ def format_table(params: ParameterSet) -> str:
     for key, value in params.provenance.items():
         header.append((f"provenance.{key}", str(value)))
     lines = [f"{key}: {value}" for key, value in header]
-    rows = [
-        (row["name"], row["unit"], repr(row["value"]), row["description"])
-        for row in parameter_rows(params)
+    rows = [  # the rows of analysis.export.parameter_rows, without importing SciPy
+        (spec.name, spec.unit, repr(float(params.values[spec.name])), spec.description)
+        for spec in parameter_specs(params.variant)
+        if spec.name in params.values
     ]
     titles = ("name", "unit", "value", "description")
     widths = [max(len(t), *(len(r[i]) for r in rows)) for i, t in enumerate(titles)]
