@@ -26,6 +26,7 @@ from hframe_id.fleet.manifest import ManifestError, load_manifest
 from hframe_id.fleet.runner import run_batch
 from hframe_id.fleet.store import ResultsStore, read_results
 from hframe_id.fleet.studies import run_trials
+from hframe_id.resources import models_dir
 
 
 @pytest.fixture(scope="module")
@@ -125,6 +126,7 @@ def test_report_flags_exactly_the_aged_rigs(batch, fleet, capsys):
 
 
 MONDAY = "2026-01-05T08:00:00Z"
+ONE_AXIS = models_dir() / "one-axis-table2.3.yaml"
 
 
 def _manifest(path: Path, fits: list[dict], defaults: dict | None = None) -> Path:
@@ -220,6 +222,7 @@ def test_a_killed_worker_loses_no_row(fleet, tmp_path):
         ),  # fmt: skip
         ({"free": ["k_x"]}, "field 'free': 'k_x' matches no parameter of hframe-8"),
         ({"initial": "missing.yaml"}, "field 'initial': missing.yaml: no such file"),
+        ({"initial": str(ONE_AXIS)}, f"field 'initial': {ONE_AXIS}: model is 'one-axis'"),
     ],
 )
 def test_bad_manifest_entries_stop_before_any_work(tmp_path, capsys, change, message):

@@ -25,6 +25,7 @@ import datetime as dt
 import difflib
 import fnmatch
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ import yaml
 
 from hframe_id.errors import HframeIdError
 from hframe_id.models import declaration, parameter_specs, variants
+from hframe_id.parameters import load_parameter_file
 
 FORMAT_VERSION = "1.0"
 FIELDS = ("rig", "time", "recordings", "model", "initial", "free")
@@ -182,7 +184,18 @@ def _job(path: Path, number: int, entry: dict[str, Any]) -> FitJob:
         initial = declaration(model).reference_file
         if initial is None:
             raise fail("initial", f"missing (model {model!r} declares no reference file)")
+    try:
+        _check_start(initial, model)
+    except HframeIdError as err:
+        raise fail("initial", str(err)) from None
     return FitJob(number, str(rig), time, resolved, model, initial, _free(entry, model, fail))
+
+
+@lru_cache(maxsize=64)
+def _check_start(initial: Path, model: str) -> None:
+    """Raises ``ParameterFileError`` unless ``initial`` is a valid parameter file of
+    ``model`` (checked once per file and model)."""
+    load_parameter_file(initial, variant=model)
 
 
 def _time(value: Any, fail) -> dt.datetime:
