@@ -4,10 +4,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from hframe_id.simulation import compiled
+from hframe_id import native
 from hframe_id.simulation.compiled import compile_function, evaluate, maybe_compile
 
-pytestmark = pytest.mark.skipif(not compiled.compiler_available(), reason="needs gcc")
+pytestmark = pytest.mark.skipif(not native.compiler_available(), reason="needs a C compiler")
 
 
 def test_inline_tanh_is_accurate_to_a_few_ulp():
@@ -51,10 +51,11 @@ def test_evaluate_checks_sizes():
 
 def test_missing_compiler_falls_back_to_the_virtual_machine(monkeypatch, tmp_path):
     monkeypatch.setenv("HFRAME_ID_CACHE", str(tmp_path))
-    monkeypatch.setattr(compiled, "_compiler_version", lambda _compiler: None)
+    monkeypatch.setattr(native, "compiler", lambda: None)
+    monkeypatch.setattr(native, "_warned", False)
     x = ca.SX.sym("x")
     f = ca.Function("g", [x], [x**2])
-    with pytest.warns(RuntimeWarning, match="virtual machine"):
+    with pytest.warns(native.NativeCodeWarning, match="virtual machine"):
         g = maybe_compile(f, True)
     assert g is f
     assert not any(tmp_path.iterdir())

@@ -86,6 +86,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ),
     ("batch", "hframe_id.cli.batch_command", "fit every entry of a manifest on Dask into Parquet"),
     ("fleet", "hframe_id.cli.fleet_command", "synthetic fleets; rig histories and drift flags"),
+    ("cache", "hframe_id.cli.cache_command", "show or clear the cache of compiled native code"),
 )
 
 

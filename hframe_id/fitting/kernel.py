@@ -8,9 +8,9 @@ so the Gauss-Newton Jacobian is the Jacobian of the residuals actually computed)
     x+ = Phi(x, u, p, s, h),    S+ = dPhi/dx S + [0, dPhi/dp_free]
 
 with S = d x / d(x_0, p_free). The substep is an SX graph (~10^4 flat instructions), generated
-as C and compiled once per (model, free set); the compiled library is cached on disk, keyed by
-the hash of its source, so later fits load it in milliseconds. Where no C compiler is
-available, CasADi's SX virtual machine runs the same graph about 2x slower.
+as C and compiled once per (model, free set) by ``hframe_id.native`` (cached on disk, so later
+fits load it in milliseconds). Where no C compiler is available, CasADi's SX virtual machine
+runs the same graph about 2x slower.
 
 Samples, windows and experiments are then layered on top: a C loop compiled with the substep
 (``DRIVER``: windows split over threads, samples and substeps in sequence), or, without a C
@@ -21,22 +21,15 @@ record (the naive unrolled graph of a six-file fit does not fit in 24 GB).
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import platform
-import shutil
-import subprocess
-import tempfile
 from functools import lru_cache
 from pathlib import Path
 
 import casadi as ca
 
+from hframe_id import native
 from hframe_id.models import Model
 
-#: Where compiled kernels are kept (override with HFRAME_ID_CACHE).
-CACHE_ENV = "HFRAME_ID_CACHE"
-COMPILE_FLAGS = ("-O2", "-fPIC", "-shared")
+COMPILE_FLAGS = ("-O2",)
 #: Tried first: code for this machine's instruction set. VEX-encoded (AVX) code runs the
 #: kernel 22 % faster on a Xeon with AVX-512 (an all-window evaluation through CasADi's
 #: map 0.161 -> 0.124 s, already with -mavx alone); contraction into FMAs stays off, so the
@@ -123,13 +116,6 @@ CASADI_SYMBOL_EXPORT int hf_windows(const casadi_real* x0, const casadi_real* u,
 """
 
 
-def cache_dir() -> Path:
-    root = os.environ.get(CACHE_ENV)
-    if root:
-        return Path(root)
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hframe-id"
-
-
 def _rk4_symbols(model: Model) -> tuple[ca.SX, ...]:
     """Symbols (x, u, p, s, h) of one substep: state, held input, parameters, smoothing
     velocities [m/s, rad/s] and substep length [s]."""
@@ -191,49 +177,11 @@ def state_substep_function(model: Model) -> ca.Function:
     )
 
 
-def _host() -> str:
-    """What ``-march=native`` resolves from: the architecture and, on Linux, the CPU flags
-    (a cache shared by different machines then keeps one native library per kind)."""
-    flags = ""
-    try:
-        with open("/proc/cpuinfo") as cpuinfo:
-            flags = next((line for line in cpuinfo if line.startswith("flags")), "")
-    except OSError:
-        pass
-    return f"{platform.machine()} {platform.processor()} {flags}"
-
-
-def _source(function: ca.Function) -> str:
-    """The C source of ``function`` (CasADi code generation)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        cg = ca.CodeGenerator("kernel.c", {"with_header": False})
-        cg.add(function)
-        cg.generate(str(Path(tmp)) + os.sep)
-        return (Path(tmp) / "kernel.c").read_text()
-
-
-def _compiler() -> str | None:
-    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-
-
-def _build_any(name: str, code: str, extra: tuple[str, ...] = ()) -> Path | None:
-    """The library of ``code``: for this machine's instruction set if the compiler can, else
-    portable; None without a working compiler."""
-    compiler = _compiler()
-    if compiler is None:
-        return None
-    for flags, host in (((*COMPILE_FLAGS, *NATIVE_FLAGS), _host()), (COMPILE_FLAGS, "")):
-        library = _build(compiler, name, code, (*flags, *extra), host)
-        if library is not None:
-            return library
-    return None
-
-
 def _compile(function: ca.Function) -> ca.Function:
-    """Compile ``function`` to a shared library (cached by source hash) and load it, or
-    return it as it is without a C compiler."""
-    library = _build_any(function.name(), _source(function))
-    return function if library is None else ca.external(function.name(), str(library))
+    """``function`` as native code (``native.compile_function``), or as it is where no
+    compiler builds it."""
+    compiled = native.compile_function(function, COMPILE_FLAGS, NATIVE_FLAGS)
+    return function if compiled is None else compiled
 
 
 class WindowKernel:
@@ -272,32 +220,9 @@ def compiled_windows(model: Model, free: tuple[int, ...] | None) -> WindowKernel
     sizes = {"FN": function.name(), "NX": model.n_states, "ND": nd, "NU": model.n_inputs}
     defines = "".join(f"#define {key} {value}\n" for key, value in sizes.items())
     name = f"{function.name()}_windows"
-    library = _build_any(name, _source(function) + defines + DRIVER, ("-pthread",))
+    source = native.c_source(function) + defines + DRIVER
+    library = native.build(name, source, (*COMPILE_FLAGS, "-pthread"), NATIVE_FLAGS)
     return None if library is None else WindowKernel(library)
-
-
-def _build(compiler: str, name: str, code: str, flags: tuple[str, ...], host: str):
-    """Path of the shared library of ``code`` built with ``flags`` (cached by the hash of
-    source, flags and ``host``), or None if the compiler fails."""
-    digest = hashlib.sha256((code + " ".join(flags) + host).encode()).hexdigest()[:20]
-    directory = cache_dir() / "kernels"
-    library = directory / f"{name}-{digest}.so"
-    if library.exists():
-        return library
-    directory.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=directory) as tmp:
-        src = Path(tmp) / "kernel.c"
-        src.write_text(code)
-        out = Path(tmp) / "kernel.so"
-        result = subprocess.run(
-            [compiler, *flags, str(src), "-o", str(out), "-lm"],
-            capture_output=True,
-            text=True,
-        )
-        if result.returncode != 0:
-            return None
-        os.replace(out, library)
-    return library
 
 
 @lru_cache(maxsize=16)

@@ -1,0 +1,264 @@
+"""Native code for CasADi functions: generate C, compile it, cache it on disk, load it.
+
+The one place where hframe-id calls a C compiler. The simulators and the closed loop
+(``simulation.compiled``), the k-step prediction and the fitter's window loop
+(``fitting.kernel``) all build through ``compile_function`` or ``build``, so every compiled
+function is found, keyed, cached and cleaned the same way.
+
+Compiler: ``$CC`` if set, else ``cc``, else ``gcc``; each build runs under a timeout
+(``COMPILE_TIMEOUT_S``). Flags: the caller's, plus ``-fPIC -shared``; ``native_flags`` (such
+as ``-march=native``) are tried first and dropped if the compiler refuses them.
+
+Cache: one folder, ``$HFRAME_ID_CACHE/native`` or ``$XDG_CACHE_HOME/hframe-id/native``
+(default ``~/.cache/hframe-id/native``). A library is ``NAME-KEY.so``, KEY the hash of the C
+source, the compiler (path and version), the flags, the CasADi version and the host CPU (what
+``-march=native`` resolves from), so a changed input never loads a stale library. Libraries
+are written atomically (concurrent processes never see half a file); when the folder grows
+beyond ``MAX_CACHE_BYTES`` the least recently used are deleted, and ``hframe-id cache clear``
+empties it.
+
+Without a working compiler nothing fails: ``build`` and ``compile_function`` return None, and
+the first such failure in a process is reported by one ``NativeCodeWarning`` line; callers
+then evaluate with CasADi's own virtual machine (same results, slower).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import casadi as ca
+
+#: Seconds one compiler run may take before it counts as failed (the largest simulator, a
+#: map over 10^5 samples, takes about 20 s on a loaded 2-core machine).
+COMPILE_TIMEOUT_S = 600
+#: Cache size [bytes] beyond which the least recently used libraries are deleted.
+MAX_CACHE_BYTES = 512 * 2**20
+#: Flags every shared library needs.
+LIBRARY_FLAGS = ("-fPIC", "-shared")
+#: Folders of the two caches this module replaced (``cache clear`` removes them too).
+_LEGACY_FOLDERS = ("casadi", "kernels")
+
+
+class NativeCodeWarning(RuntimeWarning):
+    """Native code could not be built; CasADi's virtual machine evaluates instead (slower)."""
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    """The cache folder, its number of libraries and its size [bytes]."""
+
+    folder: Path
+    libraries: int
+    size: int
+
+
+_warned = False
+
+
+def cache_root() -> Path:
+    """The hframe-id cache folder: ``$HFRAME_ID_CACHE`` or ``$XDG_CACHE_HOME/hframe-id``."""
+    root = os.environ.get("HFRAME_ID_CACHE")
+    if root:
+        return Path(root)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "hframe-id"
+
+
+def cache_directory() -> Path:
+    """Where compiled libraries live (``cache_root() / "native"``)."""
+    return cache_root() / "native"
+
+
+@lru_cache(maxsize=4)
+def _compiler_identity(name: str) -> tuple[str, str] | None:
+    """(path, first line of ``--version``) of compiler ``name``, or None if it does not run."""
+    path = shutil.which(name)
+    if path is None:
+        return None
+    try:
+        result = subprocess.run(
+            [path, "--version"], capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if result.returncode != 0 or not result.stdout:
+        return None
+    return path, result.stdout.splitlines()[0]
+
+
+def compiler() -> tuple[str, str] | None:
+    """(path, version) of the C compiler used (``$CC``, ``cc`` or ``gcc``), None if none runs."""
+    names = [os.environ["CC"]] if os.environ.get("CC") else []
+    for name in (*names, "cc", "gcc"):
+        identity = _compiler_identity(name)
+        if identity is not None:
+            return identity
+    return None
+
+
+def compiler_available() -> bool:
+    """True if a C compiler runs here (so native code can be built)."""
+    return compiler() is not None
+
+
+@lru_cache(maxsize=1)
+def _host() -> str:
+    """What ``-march=native`` resolves from: the architecture and, on Linux, the CPU model
+    and flags (a cache shared by different machines keeps one library per kind of CPU)."""
+    host = f"{platform.machine()} {platform.processor()}"
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        return host
+    for key in ("model name", "flags"):
+        host += next((" " + line for line in lines if line.startswith(key)), "")
+    return host
+
+
+def cache_key(source: str, flags: Sequence[str], identity: tuple[str, str]) -> str:
+    """The cache key of ``source`` built with ``flags`` by compiler ``identity`` (path,
+    version): a hash that also covers the CasADi version and the host CPU."""
+    parts = (source, " ".join(flags), *identity, ca.__version__, _host())
+    return hashlib.sha256("\0".join(parts).encode()).hexdigest()[:24]
+
+
+def c_source(function: ca.Function) -> str:
+    """The C source of ``function`` (CasADi's code generator, no header)."""
+    generator = ca.CodeGenerator(f"{function.name()}.c", {"with_header": False})
+    generator.add(function)
+    return generator.dump()
+
+
+def _warn_once(reason: str) -> None:
+    """One ``NativeCodeWarning`` line per process: later failures have the same consequence
+    (CasADi's virtual machine) and would only repeat it."""
+    global _warned
+    if _warned:
+        return
+    _warned = True
+    # warn_explicit without a source line: the warning prints as one line.
+    warnings.warn_explicit(
+        f"native code unavailable ({reason}); evaluating with CasADi's virtual machine",
+        NativeCodeWarning,
+        "hframe-id",
+        0,
+        module="hframe_id.native",
+    )
+
+
+def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -> str | None:
+    """Compile ``source`` with ``flags`` into ``library`` (atomically); the reason as one
+    line if the compiler fails or times out, else None."""
+    library.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
+        c_file = Path(scratch) / "source.c"
+        c_file.write_text(source)
+        built = Path(scratch) / library.name
+        command = [path, *flags, *LIBRARY_FLAGS, str(c_file), "-o", str(built), "-lm"]
+        try:
+            result = subprocess.run(
+                command, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S
+            )
+        except subprocess.TimeoutExpired:
+            return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
+        except OSError as err:
+            return f"{Path(path).name}: {err}"
+        if result.returncode != 0:
+            errors = [line for line in result.stderr.splitlines() if "error" in line]
+            detail = (errors or result.stderr.splitlines() or ["no message"])[0]
+            return f"{Path(path).name} failed: {detail.strip()}"
+        os.replace(built, library)
+    return None
+
+
+def _stat(path: Path) -> tuple[float, int]:
+    """(last use, size [bytes]) of a cached library; (0, 0) if another process removed it."""
+    try:
+        status = path.stat()
+    except FileNotFoundError:
+        return 0.0, 0
+    return status.st_mtime, status.st_size
+
+
+def _prune(keep: Path) -> None:
+    """Delete the least recently used libraries while the cache exceeds ``MAX_CACHE_BYTES``
+    (never ``keep``). A library loaded by a running process stays usable: it is unlinked,
+    not overwritten."""
+    libraries = sorted((*_stat(f), f) for f in cache_directory().glob("*.so"))
+    total = sum(size for _, size, _ in libraries)
+    for _, size, library in libraries:
+        if total <= MAX_CACHE_BYTES:
+            break
+        if library != keep:
+            total -= size
+            library.unlink(missing_ok=True)
+
+
+def build(
+    name: str, source: str, flags: Sequence[str] = (), native_flags: Sequence[str] = ()
+) -> Path | None:
+    """The shared library of C ``source``, built once and cached (see the module docstring).
+
+    ``flags`` are always used; ``native_flags`` are tried first and dropped if that build
+    fails. Returns the library's path, or None (after one ``NativeCodeWarning`` per process)
+    if no compiler runs or it fails.
+    """
+    identity = compiler()
+    if identity is None:
+        _warn_once("no C compiler: $CC, cc and gcc not found")
+        return None
+    attempts = [(*flags, *native_flags), tuple(flags)] if native_flags else [tuple(flags)]
+    reason = None
+    for attempt in attempts:
+        library = cache_directory() / f"{name}-{cache_key(source, attempt, identity)}.so"
+        if library.exists():
+            os.utime(library)  # recently used: the last to be pruned
+            return library
+        reason = _run_compiler(identity[0], attempt, source, library)
+        if reason is None:
+            _prune(keep=library)
+            return library
+    _warn_once(f"{reason} on {name}")
+    return None
+
+
+def compile_function(
+    function: ca.Function,
+    flags: Sequence[str] = ("-O2",),
+    native_flags: Sequence[str] = (),
+    prelude: str = "",
+) -> ca.Function | None:
+    """``function`` as native code (same name, inputs and outputs), or None where it cannot
+    be built (then evaluate ``function`` itself). ``prelude`` is C put before the generated
+    source (inline replacements of math functions, say)."""
+    library = build(function.name(), prelude + c_source(function), flags, native_flags)
+    return None if library is None else ca.external(function.name(), str(library))
+
+
+def cache_info() -> CacheInfo:
+    """The cache folder, the number of libraries in it and their size [bytes]."""
+    folder = cache_directory()
+    libraries = list(folder.glob("*.so")) if folder.is_dir() else []
+    return CacheInfo(folder, len(libraries), sum(_stat(f)[1] for f in libraries))
+
+
+def clear_cache() -> int:
+    """Delete every cached library (and the folders of the caches this module replaced);
+    returns the number of bytes freed. Running processes keep the libraries they loaded."""
+    freed = 0
+    for folder in (cache_directory(), *(cache_root() / old for old in _LEGACY_FOLDERS)):
+        if not folder.is_dir():
+            continue
+        freed += sum(_stat(f)[1] for f in folder.rglob("*") if f.is_file())
+        shutil.rmtree(folder, ignore_errors=True)
+    return freed
