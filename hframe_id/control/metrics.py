@@ -22,7 +22,7 @@ maximum offset (``offset_max_m``, Tables' "Offset max")
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -38,9 +38,6 @@ class LegMetrics:
     offset_max_m: float
     overshoot_time_s: float | None
     offset_max_time_s: float
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def perpendicular_error(time_s: np.ndarray, xy_m: np.ndarray, trajectory: Trajectory) -> np.ndarray:

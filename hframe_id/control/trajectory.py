@@ -187,16 +187,6 @@ class Trajectory:
         n = int(math.floor(self.end_time_s / sample_period_s + 1e-9)) + 1
         return np.arange(n) * sample_period_s
 
-    def bounding_box(self) -> tuple[float, float, float, float]:
-        """(x_min, x_max, y_min, y_max) [m] of the straight legs."""
-        points = np.array([p for leg in self.legs for p in (leg.start_m, leg.end_m)])
-        return (
-            float(points[:, 0].min()),
-            float(points[:, 0].max()),
-            float(points[:, 1].min()),
-            float(points[:, 1].max()),
-        )
-
 
 def square(
     side_m: float = SQUARE_SIDE_M,

@@ -573,26 +573,3 @@ class MultipleShooting:
         if kernel(arrays, self.dt / n_sub, n_sub, len(inputs), 1, 1) != 0:
             raise FloatingPointError("simulation failed")
         return np.vstack([arrays["x0"], arrays["xs"]])
-
-    def simulate_outputs(
-        self, nodes0: np.ndarray, theta: np.ndarray, smoothing: tuple[float, float]
-    ) -> list[np.ndarray]:
-        """Outputs (N, n_y) of each experiment simulated from its initial state (single
-        shooting), for plots and checks."""
-        from hframe_id.simulation.open_loop import simulate
-
-        p = self.problem.parameters(theta)
-        plan = self.substep_plan(p, smoothing)
-        result = []
-        for e, exp in enumerate(self.problem.experiments):
-            states = simulate(
-                self.model,
-                p,
-                exp.inputs,
-                self.dt,
-                x0=nodes0[e],
-                n_substeps=plan["stiff"],
-                smoothing=smoothing,
-            )[:-1]
-            result.append(states @ self.c.T)
-        return result

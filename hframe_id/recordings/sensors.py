@@ -76,11 +76,6 @@ class SensorModel:
         """Voltage of one DAC step [V] (offset binary: span / 2^bits)."""
         return (self.dac_max_v - self.dac_min_v) / 2**self.dac_bits
 
-    @property
-    def encoder_noise_std_rad(self) -> float:
-        """Standard deviation of uniform quantization error [rad]: step / sqrt(12)."""
-        return self.encoder_step_rad / math.sqrt(12)
-
     def as_metadata(self) -> dict[str, float | int]:
         """The sensor fields of the ``rig`` metadata record, in the log format's order."""
         order = ("encoder_counts_per_rev", "dac_bits", "dac_min_v", "dac_max_v",
