@@ -10,15 +10,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from hframe_id.errors import ModelError
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import HFRAME_UNITS
+
+if TYPE_CHECKING:  # pandas costs 0.5-1 s to import; only to_dataframe needs it
+    import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -140,6 +142,8 @@ class Recording:
     def to_dataframe(self) -> pd.DataFrame:
         """Samples as a DataFrame indexed by time [s]; columns carry units in their names
         (inputs, then each output with its validity, then the extra signals)."""
+        import pandas as pd
+
         data = {
             f"{n} [{u}]": self.inputs[:, i]
             for i, (n, u) in enumerate(zip(self.input_names, self.input_units, strict=True))
