@@ -3,7 +3,8 @@
 Each command module defines ``register(subparsers)``, which adds its parser and sets
 ``handler`` to a function ``(args) -> int``. Errors derived from ``HframeIdError`` are printed
 as one line (``hframe-id: error: ...``) with exit status 2; nothing is printed from deep inside
-a library.
+a library, and warnings reach the user as one line (``hframe-id: warning: ...``) without the
+source location Python adds.
 
 Only the module of the command being run is imported (``hframe-id --help`` imports none):
 every other command gets a placeholder parser that shows its line in the listing. Command
