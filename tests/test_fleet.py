@@ -9,6 +9,7 @@ single-thread in-process cluster.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import signal
@@ -21,6 +22,7 @@ import yaml
 from distributed import Client, LocalCluster
 
 from hframe_id.cli import main
+from hframe_id.fitting import FitOptions
 from hframe_id.fleet.drift import DEFAULT_THRESHOLD
 from hframe_id.fleet.manifest import ManifestError, load_manifest
 from hframe_id.fleet.runner import run_batch
@@ -266,3 +268,17 @@ def test_study_trials_run_on_the_cluster(client):
     (trial,) = run_trials(_connect(client), "hframe-8", [1], on_trial=seen.append)
     assert seen == [trial] and trial.seed == 1
     assert trial.success and trial.max_error < 0.01  # the recovery tests' 1 %
+
+
+def test_a_solver_failure_is_a_failed_row_without_parameter_file(fleet, tmp_path, monkeypatch):
+    from hframe_id.fleet import job as job_module
+
+    def one_iteration(model, free):
+        return dataclasses.replace(FitOptions(threads=1, verbose=0), max_iterations=1)
+
+    monkeypatch.setattr(job_module, "batch_options_for", one_iteration)
+    job = load_manifest(fleet / "manifest.yaml")[0]
+    row = job_module.run_job(job, "k", ["d"], tmp_path, reports=False)
+    assert row["status"] == "failed" and row["message"]
+    assert row["parameter_file"] is None and row["fit_id"]
+    assert "k_l [N/m]" in row  # the estimates where the solver stopped
