@@ -29,6 +29,8 @@ import casadi as ca
 from hframe_id import native
 from hframe_id.models import Model
 
+#: Compiler flags of the kernels: no value-changing optimization, so the results are bitwise
+#: those of CasADi's virtual machine (tests/test_native.py).
 COMPILE_FLAGS = ("-O2",)
 #: Tried first: code for this machine's instruction set. VEX-encoded (AVX) code runs the
 #: kernel 22 % faster on a Xeon with AVX-512 (an all-window evaluation through CasADi's

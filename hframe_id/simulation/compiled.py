@@ -1,4 +1,4 @@
-"""Compile CasADi functions to native code once, and reuse them across processes.
+"""Native code for the simulators: their compiler flags and inline tanh, and NumPy evaluation.
 
 The simulators are CasADi SX graphs mapped over the horizon (``mapaccum``); CasADi's virtual
 machine evaluates them at about 10 ns per operation, C compiled by gcc about 4x faster. The
