@@ -12,7 +12,7 @@ import pytest
 from hframe_id.cli import COMMANDS
 
 #: Commands whose --help states choices held in modules that import NumPy or CasADi.
-HEAVY_HELP = {"export", "import", "control"}
+HEAVY_HELP = {"export", "control"}
 
 #: Prints, after a command line has run, which modules costing 0.1-2 s each it imported.
 PROBE = """

@@ -9,7 +9,6 @@ import sys
 from hframe_id.cli.outputs import check_file
 from hframe_id.errors import OptionError
 from hframe_id.recordings.import_spec import ROLES, ColumnMap, ImportSpec
-from hframe_id.recordings.importer import import_recording
 from hframe_id.recordings.units import KNOWN_UNITS
 
 EPILOG = """\
@@ -110,6 +109,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hframe_id.recordings.importer import import_recording
+
     try:
         spec = ImportSpec(
             columns=tuple(ColumnMap.parse(text) for text in args.map),
