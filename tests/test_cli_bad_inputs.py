@@ -58,6 +58,9 @@ def inputs(tmp_path_factory) -> Path:
     (d / "nan.csv").write_text(CSV_HEADER + "0,nan,0\n0.1,1,1\n")
     (d / "header.csv").write_text("t,volts\n0,1\n")
     (d / "good.csv").write_text(CSV_HEADER + "0,1,0\n0.001,1,1e-6\n0.002,1,2e-6\n")
+    with (d / "huge.csv").open("wb") as stream:  # sparse, all NUL bytes
+        stream.truncate(200 * 2**20)
+    (d / "longfield.csv").write_text(CSV_HEADER + "0," + "1" * 200_000 + ",0\n")
     (d / "latin1.csv").write_bytes(("time [s],u1 [V],u2 [V] é\n0,1,1\n").encode("latin-1"))
     (d / "syntax.py").write_text("def broken(:\n")
     (d / "noop.py").write_text("x = 1\n")
@@ -103,7 +106,9 @@ RECORDING_READERS = (
 IMPORT_MAP = ("--map", "time [s]=time:s", "--map", "u1 [V]=input:V:u1",
               "--map", "u2 [V]=output:m:x", "--variant", "a")  # fmt: skip
 MAT_MAP = ("--map", "t=time:s", "--map", "u=input:V", "--map", "y=output:m", "--variant", "a")
-BAD_CSVS = ("empty.csv", "binary.csv", "nan.csv", "header.csv", "latin1.csv")
+BAD_CSVS = (
+    "empty.csv", "binary.csv", "nan.csv", "header.csv", "latin1.csv", "huge.csv", "longfield.csv"
+)  # fmt: skip
 CSV_READERS = (
     ("simulate", "--params", str(H8), "--csv", "{c}", "--out", "{out}/s.csv"),
     ("record", "--rig", "sim", "--params", str(H8), "--protocol", "csv", "--csv", "{c}",

@@ -120,6 +120,9 @@ def read_source(path: str | os.PathLike) -> SourceTable:
 
 
 def _read_csv(path: Path) -> SourceTable:
+    with open(path, "rb") as stream:
+        if b"\0" in stream.read(65536):
+            raise SourceDataError(f"{path}: binary data, not a CSV text file")
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except UnicodeDecodeError as err:
@@ -130,10 +133,13 @@ def _read_csv(path: Path) -> SourceTable:
     if start == len(lines):
         raise SourceDataError(f"{path}: no header line (the file is empty or all comments)")
     try:
-        delimiter = csv.Sniffer().sniff(lines[start], delimiters=",;\t").delimiter
+        delimiter = csv.Sniffer().sniff(lines[start][:4096], delimiters=",;\t").delimiter
     except csv.Error:
         delimiter = ","
-    rows = list(csv.reader(lines[start:], delimiter=delimiter))
+    try:
+        rows = list(csv.reader(lines[start:], delimiter=delimiter))
+    except csv.Error as err:
+        raise SourceDataError(f"{path}: not a readable CSV file ({err})") from None
     header = [name.strip() for name in rows[0]]
     doubled = sorted({n for n in header if header.count(n) > 1})
     if doubled or "" in header:

@@ -300,10 +300,16 @@ def load_sequence_csv(path: str | os.PathLike, duration_s: float | None = None) 
     """Read a voltage sequence: header ``time [s],u1 [V][,u2 [V]]``, then one row per change."""
     path = Path(path)
     try:
+        with path.open("rb") as stream:
+            if b"\0" in stream.read(65536):
+                raise OptionError(f"{path}: binary data, not a CSV voltage sequence")
         raw = path.read_bytes()
     except OSError as err:
         raise OptionError(f"{path}: cannot read the voltage sequence ({err.strerror})") from None
-    rows = list(csv.reader(raw.decode(errors="replace").splitlines()))
+    try:
+        rows = list(csv.reader(raw.decode(errors="replace").splitlines()))
+    except csv.Error as err:
+        raise OptionError(f"{path}: not a CSV voltage sequence ({err})") from None
     rows = [r for r in rows if r and not r[0].lstrip().startswith("#")]
     if not rows:
         raise OptionError(f"{path}: empty voltage sequence")
