@@ -273,10 +273,10 @@ def test_study_trials_run_on_the_cluster(client):
 def test_a_solver_failure_is_a_failed_row_without_parameter_file(fleet, tmp_path, monkeypatch):
     from hframe_id.fleet import job as job_module
 
-    def one_iteration(model, free):
+    def one_iteration(job):
         return dataclasses.replace(FitOptions(threads=1, verbose=0), max_iterations=1)
 
-    monkeypatch.setattr(job_module, "batch_options_for", one_iteration)
+    monkeypatch.setattr(job_module, "batch_options", one_iteration)
     job = load_manifest(fleet / "manifest.yaml")[0]
     row = job_module.run_job(job, "k", ["d"], tmp_path, reports=False)
     assert row["status"] == "failed" and row["message"]

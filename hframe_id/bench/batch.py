@@ -29,7 +29,8 @@ from pathlib import Path
 from distributed import Client, LocalCluster
 
 from hframe_id.bench import heading
-from hframe_id.fleet.job import batch_options, job_key, run_job, sha256_file, warm_up
+from hframe_id.fleet.job import run_job, warm_up
+from hframe_id.fleet.keys import batch_options, job_key, sha256_file
 from hframe_id.fleet.manifest import load_manifest
 from hframe_id.fleet.runner import run_batch
 from hframe_id.fleet.store import ResultsStore

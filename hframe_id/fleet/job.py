@@ -10,9 +10,6 @@ worker, and ``warm_up`` builds them before the first task.
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import json
 import os
 import socket
 import time
@@ -20,70 +17,16 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from hframe_id.fitting import FitOptions, FitResult, fit_recordings
+from hframe_id.fitting import FitResult, fit_recordings
 from hframe_id.fitting.kernel import compiled_windows
 from hframe_id.fitting.output import write_parameter_file
 from hframe_id.fitting.problem import resolve_free
 from hframe_id.fitting.report import write_report
+from hframe_id.fleet.keys import base_row, batch_options, batch_options_for
 from hframe_id.fleet.manifest import FitJob
-from hframe_id.models import build_model, declaration
+from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
-
-#: FitOptions fields that do not change a fit's result, left out of its key.
-_NOT_IN_KEY = ("verbose", "progress", "threads")
-
-#: Row statuses: the fit converged; the solver failed (a report, no parameter file); an
-#: exception before or during the fit (unreadable recording, a worker that kept dying).
-STATUSES = ("ok", "failed", "error")
-
-
-def sha256_file(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def batch_options(job: FitJob) -> FitOptions:
-    """The options of a batch fit: the model's fit defaults, ``job.free``, one thread (a
-    worker runs one fit at a time; parallelism comes from workers), no progress output."""
-    return batch_options_for(job.model, job.free)
-
-
-def batch_options_for(model: str, free: tuple[str, ...] | None) -> FitOptions:
-    options = FitOptions(free=free, threads=1, verbose=0)
-    return dataclasses.replace(options, **dict(declaration(model).fit_defaults))
-
-
-def job_key(job: FitJob, options: FitOptions, digests: list[str]) -> str:
-    """The fit's identity in the store: sha256 of the recordings' sha256, the model, the
-    initial file's sha256 and every option that changes the result."""
-    fields = {
-        name: value
-        for name, value in dataclasses.asdict(options).items()
-        if name not in _NOT_IN_KEY
-    }
-    identity = {
-        "recordings": digests,
-        "model": job.model,
-        "initial": sha256_file(job.initial),
-        "options": fields,
-    }
-    text = json.dumps(identity, sort_keys=True, default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def base_row(job: FitJob, key: str, digests: list[str]) -> dict[str, Any]:
-    """The columns every row has, whatever the fit's outcome."""
-    return {
-        "key": key,
-        "rig": job.rig,
-        "run_time": job.time,
-        "entry": job.entry,
-        "model": job.model,
-        "recordings": ";".join(str(p) for p in job.recordings),
-        "recordings_sha256": ";".join(digests),
-        "initial": str(job.initial),
-        "free": ",".join(job.free) if job.free else "",
-    }
 
 
 def warm_up(jobs: list[FitJob]) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 from distributed import Client, LocalCluster, as_completed
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from hframe_id.fleet.job import base_row, batch_options, job_key, run_job, sha256_file, warm_up
+from hframe_id.fleet.keys import base_row, batch_options, job_key, sha256_file
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.fleet.store import ResultsStore
 
@@ -53,6 +53,8 @@ class KernelWarmUp(WorkerPlugin):
         self.jobs = jobs
 
     def setup(self, worker) -> None:
+        from hframe_id.fleet.job import warm_up
+
         warm_up(self.jobs)
 
 
@@ -134,6 +136,8 @@ def run_batch(
 
 
 def _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress) -> None:
+    from hframe_id.fleet.job import run_job  # the solver and plotting: only if fits are pending
+
     client.register_plugin(KernelWarmUp([job for job, _, _ in pending]), name="hframe-id-warm")
     futures = {
         client.submit(
