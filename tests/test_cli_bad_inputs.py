@@ -65,6 +65,13 @@ def inputs(tmp_path_factory) -> Path:
     (d / "syntax.py").write_text("def broken(:\n")
     (d / "noop.py").write_text("x = 1\n")
     (d / "adir.yaml").mkdir()
+    for name, manifest in (
+        ("binary", binary),
+        ("notyaml", b"a: [1\n"),
+        ("entry", b"datasets: [1]\n"),
+    ):
+        (d / f"manifest_{name}").mkdir()
+        (d / f"manifest_{name}" / "manifest.yaml").write_bytes(manifest)
     return d
 
 
@@ -85,6 +92,7 @@ PARAM_READERS = (
      "0.05", "--fast", "--out", "{out}/r.mcap"),
     ("fit", str(REC), "--initial", "{p}", "--out-dir", "{out}/fits"),
     ("validate", "{p}", str(REC)),
+    ("reproduce", "--out", "{out}/rep", "--params", "{p}"),
     ("simulate", "--plant", "{p}", "--step", "1,4", "--duration", "0.1", "--out", "{out}/p.csv"),
 )  # fmt: skip
 #: Recording kinds and the commands that read one ({r}).
@@ -138,6 +146,9 @@ OTHER = {
     "export-unknown-format": ("export", str(H8), "--format", "excel"),
     "datasets-verify-absent": ("datasets", "verify", "--dir", "{in}/absent"),
     "datasets-verify-empty-dir": ("datasets", "verify", "--dir", "{in}/adir.yaml"),
+    "datasets-verify-binary-manifest": ("datasets", "verify", "--dir", "{in}/manifest_binary"),
+    "datasets-verify-manifest-not-yaml": ("datasets", "verify", "--dir", "{in}/manifest_notyaml"),
+    "datasets-verify-manifest-entry": ("datasets", "verify", "--dir", "{in}/manifest_entry"),
     # unwritable outputs
     "simulate-out-proc": ("simulate", "--params", str(H8), "--step", "1,4", "--duration", "0.05",
                           "--out", "/proc/nope.csv"),

@@ -79,7 +79,7 @@ class ParameterSet:
         return str(self.path) if self.path else f"<{self.variant} parameters>"
 
 
-def _one_line(err: yaml.YAMLError) -> str:
+def yaml_error_line(err: yaml.YAMLError) -> str:
     """PyYAML's problem and its line/column, on one line."""
     mark = getattr(err, "problem_mark", None)
     problem = getattr(err, "problem", None) or str(err).splitlines()[0]
@@ -205,7 +205,7 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise ParameterFileError(f"{where}: not valid YAML ({_one_line(err)})") from None
+        raise ParameterFileError(f"{where}: not valid YAML ({yaml_error_line(err)})") from None
     check_header(doc, _REQUIRED_HEADER, _OPTIONAL_HEADER, where)
     _check_format_version(doc["format_version"], where)
     model = doc["model"]

@@ -37,6 +37,7 @@ import yaml
 
 from hframe_id.errors import OptionError, ParameterFileError
 from hframe_id.parameters import ParameterSet, load_parameter_file, save_parameter_file
+from hframe_id.parameters.files import read_text, yaml_error_line
 from hframe_id.resources import models_dir
 from hframe_id.rig.logger import RunOptions, RunSummary, run_experiment
 from hframe_id.rig.plant import Plant, load_plant_file, save_plant_file
@@ -313,12 +314,16 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
     """The manifest of a datasets folder, checked for the keys every entry needs."""
     path = Path(path)
     try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
+        doc = yaml.safe_load(read_text(path, "dataset manifest"))
+    except OSError as err:
         raise ParameterFileError(f"{path}: cannot read the dataset manifest ({err})") from None
+    except yaml.YAMLError as err:
+        raise ParameterFileError(f"{path}: not valid YAML ({yaml_error_line(err)})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("datasets"), list):
         raise ParameterFileError(f"{path}: a manifest needs a 'datasets' list")
     for entry in doc["datasets"]:
+        if not isinstance(entry, dict):
+            raise ParameterFileError(f"{path}: entry {entry!r} is not a mapping")
         missing = [k for k in ("file", "sha256", "truth", "seed") if k not in entry]
         if missing:
             raise ParameterFileError(f"{path}: entry {entry!r} lacks {', '.join(missing)}")
