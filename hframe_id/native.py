@@ -28,6 +28,7 @@ import hashlib
 import os
 import platform
 import shutil
+import signal
 import subprocess
 import tempfile
 import warnings
@@ -166,16 +167,26 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
         built = Path(scratch) / library.name
         command = [path, *flags, *LIBRARY_FLAGS, str(c_file), "-o", str(built), "-lm"]
         try:
-            result = subprocess.run(
-                command, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S
+            # A session of its own: on a timeout the whole group (driver, cc1, as, ld) is
+            # killed, not only the driver, whose children would otherwise run on.
+            process = subprocess.Popen(
+                command,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                start_new_session=True,
             )
-        except subprocess.TimeoutExpired:
-            return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
         except OSError as err:
             return f"{Path(path).name}: {err}"
-        if result.returncode != 0:
-            errors = [line for line in result.stderr.splitlines() if "error" in line]
-            detail = (errors or result.stderr.splitlines() or ["no message"])[0]
+        try:
+            _, stderr = process.communicate(timeout=COMPILE_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()
+            return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
+        if process.returncode != 0:
+            errors = [line for line in stderr.splitlines() if "error" in line]
+            detail = (errors or stderr.splitlines() or ["no message"])[0]
             return f"{Path(path).name} failed: {detail.strip()}"
         os.replace(built, library)
     return None

@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import casadi as ca
@@ -78,6 +79,31 @@ def test_cache_keeps_under_its_cap(cache, monkeypatch):
     monkeypatch.setattr(native, "MAX_CACHE_BYTES", old.stat().st_size + 1)
     new = native.build("halve_native", native.c_source(_halve()), ("-O2",))
     assert new.exists() and not old.exists()
+
+
+@pytest.mark.parametrize(
+    ("body", "reason"),
+    [
+        ('echo "source.c:1: error: boom" >&2; exit 1', "fake-cc failed: source.c:1: error: boom"),
+        ("sleep 30; true", "fake-cc took more than 1 s"),  # sleep: a child of the driver
+    ],
+)
+def test_a_failing_compiler_warns_once_and_falls_back(cache, monkeypatch, body, reason):
+    compiler = cache / "fake-cc"
+    compiler.write_text(
+        f'#!/bin/sh\nif [ "$1" = --version ]; then echo "fake 1.0"; exit 0; fi\n{body}\n'
+    )
+    compiler.chmod(0o755)
+    monkeypatch.setenv("CC", str(compiler))
+    monkeypatch.setattr(native, "COMPILE_TIMEOUT_S", 1)
+    monkeypatch.setattr(native, "_warned", False)
+    start = time.monotonic()
+    with pytest.warns(native.NativeCodeWarning) as caught:
+        assert native.compile_function(_halve()) is None
+        assert native.compile_function(_halve(), ("-O1",)) is None  # no second warning
+    assert time.monotonic() - start < 20  # the timed-out group was killed, children too
+    assert len(caught) == 1 and reason in str(caught[0].message)
+    assert native.cache_info().libraries == 0
 
 
 @needs_compiler
