@@ -232,9 +232,11 @@ def build(
     reason = None
     for attempt in attempts:
         library = cache_directory() / f"{name}-{cache_key(source, attempt, identity)}.so"
-        if library.exists():
+        try:
             os.utime(library)  # recently used: the last to be pruned
             return library
+        except FileNotFoundError:
+            pass  # not built yet (or just pruned by another process)
         reason = _run_compiler(identity[0], attempt, source, library)
         if reason is None:
             _prune(keep=library)
