@@ -29,7 +29,7 @@ from pathlib import Path
 from distributed import Client, LocalCluster
 
 from hframe_id.bench import heading
-from hframe_id.fleet.job import run_job, warm_up
+from hframe_id.fleet.job import fit_kinds, run_job, warm_up
 from hframe_id.fleet.keys import batch_options, job_key, sha256_file
 from hframe_id.fleet.manifest import load_manifest
 from hframe_id.fleet.runner import run_batch
@@ -40,7 +40,7 @@ RIGS, WEEKS, SEED = 8, 2, 11
 
 
 def _sequential(jobs, out: Path) -> float:
-    warm_up(jobs)
+    warm_up(fit_kinds(jobs))
     start = time.perf_counter()
     for job in jobs:
         digests = [sha256_file(p) for p in job.recordings]

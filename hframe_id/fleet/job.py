@@ -29,11 +29,17 @@ from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
 
 
-def warm_up(jobs: list[FitJob]) -> None:
+def fit_kinds(jobs: list[FitJob]) -> list[tuple[str, tuple[str, ...]]]:
+    """The distinct (model, free set) pairs of ``jobs`` (``()``: the model's default set),
+    each of which has its own compiled kernels."""
+    return sorted({(job.model, job.free or ()) for job in jobs})
+
+
+def warm_up(kinds: list[tuple[str, tuple[str, ...]]]) -> None:
     """Derive the models and build (or load from the disk cache, ``HFRAME_ID_CACHE``) the
-    compiled window kernels of ``jobs``' models and free sets in this process, so that no
-    task pays for them."""
-    for model_name, free in sorted({(job.model, job.free or ()) for job in jobs}):
+    compiled window kernels of each (model, free set) of ``fit_kinds`` in this process, so
+    that no task pays for them."""
+    for model_name, free in kinds:
         model = build_model(model_name)
         options = batch_options_for(model_name, free or None)
         names = resolve_free(model, options)

@@ -49,13 +49,13 @@ class KernelWarmUp(WorkerPlugin):
     """Builds the batch's models and compiled kernels once on every worker, including
     workers that join (or replace a dead one) later."""
 
-    def __init__(self, jobs: list[FitJob]) -> None:
-        self.jobs = jobs
+    def __init__(self, kinds: list[tuple[str, tuple[str, ...]]]) -> None:
+        self.kinds = kinds
 
     def setup(self, worker) -> None:
         from hframe_id.fleet.job import warm_up
 
-        warm_up(self.jobs)
+        warm_up(self.kinds)
 
 
 @contextmanager
@@ -136,9 +136,10 @@ def run_batch(
 
 
 def _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress) -> None:
-    from hframe_id.fleet.job import run_job  # the solver and plotting: only if fits are pending
+    from hframe_id.fleet.job import fit_kinds, run_job  # solver and plots: only if pending
 
-    client.register_plugin(KernelWarmUp([job for job, _, _ in pending]), name="hframe-id-warm")
+    kinds = fit_kinds([job for job, _, _ in pending])
+    client.register_plugin(KernelWarmUp(kinds), name="hframe-id-warm")
     futures = {
         client.submit(
             run_job, job, key, digests, out_dir, reports, key=f"fit-{key[:20]}", pure=False
