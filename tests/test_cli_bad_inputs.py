@@ -60,6 +60,7 @@ def inputs(tmp_path_factory) -> Path:
     (d / "good.csv").write_text(CSV_HEADER + "0,1,0\n0.001,1,1e-6\n0.002,1,2e-6\n")
     with (d / "huge.csv").open("wb") as stream:  # sparse, all NUL bytes
         stream.truncate(200 * 2**20)
+    (d / "longseq.csv").write_text(CSV_HEADER + "0,1,1\n1e9,0,0\n")  # 10^12 samples
     (d / "longfield.csv").write_text(CSV_HEADER + "0," + "1" * 200_000 + ",0\n")
     (d / "latin1.csv").write_bytes(("time [s],u1 [V],u2 [V] é\n0,1,1\n").encode("latin-1"))
     (d / "syntax.py").write_text("def broken(:\n")
@@ -149,6 +150,15 @@ OTHER = {
     "datasets-verify-binary-manifest": ("datasets", "verify", "--dir", "{in}/manifest_binary"),
     "datasets-verify-manifest-not-yaml": ("datasets", "verify", "--dir", "{in}/manifest_notyaml"),
     "datasets-verify-manifest-entry": ("datasets", "verify", "--dir", "{in}/manifest_entry"),
+    # runs too long to hold in memory
+    "simulate-duration-1e9": ("simulate", "--params", str(H8), "--step", "1,4", "--duration",
+                              "1e9", "--out", "{out}/s.csv"),
+    "record-duration-1e9": ("record", "--rig", "sim", "--params", str(H8), "--v1", "1", "--v2",
+                            "1", "--duration", "1e9", "--fast", "--out", "{out}/r.mcap"),
+    "simulate-csv-longseq": ("simulate", "--params", str(H8), "--csv", "{in}/longseq.csv",
+                             "--out", "{out}/s.csv"),
+    "record-csv-longseq": ("record", "--rig", "sim", "--params", str(H8), "--protocol", "csv",
+                           "--csv", "{in}/longseq.csv", "--fast", "--out", "{out}/r.mcap"),
     # unwritable outputs
     "simulate-out-proc": ("simulate", "--params", str(H8), "--step", "1,4", "--duration", "0.05",
                           "--out", "/proc/nope.csv"),

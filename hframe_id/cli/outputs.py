@@ -1,9 +1,10 @@
-"""Output paths checked before any work is done.
+"""Output paths and run lengths checked before any work is done.
 
 A command that cannot write its result says so at once, as one line with exit status 2,
 instead of failing after seconds or minutes of computing, and writes nothing. Writability is
 probed by creating (and at once removing) a temporary file where the output would go: the
 permission bits say little when running as root or on special file systems such as /proc.
+A run longer than ``MAX_SAMPLES`` is refused the same way, before its tables are allocated.
 """
 
 from __future__ import annotations
@@ -58,3 +59,19 @@ def check_dir(path: str | os.PathLike, option: str) -> Path:
         raise OptionError(f"{option} {path}: {ancestor} is not a directory")
     _probe(ancestor, option, path)
     return path
+
+
+#: Samples one simulated or recorded run may have: 10 million is 2.8 h at 1 kHz and keeps the
+#: signal tables near a gigabyte; longer runs fail at once instead of with a MemoryError.
+MAX_SAMPLES = 10_000_000
+
+
+def check_length(duration_s: float, period_s: float, option: str) -> None:
+    """Refuse a run of more than MAX_SAMPLES samples of ``period_s`` (``option`` names the
+    setting at fault)."""
+    samples = duration_s / period_s
+    if samples > MAX_SAMPLES:
+        raise OptionError(
+            f"{option}: {duration_s:g} s at {period_s * 1e3:g} ms is {samples:.3g} samples; "
+            f"at most {MAX_SAMPLES:,} per run ({MAX_SAMPLES * period_s / 3600:.3g} h)"
+        )

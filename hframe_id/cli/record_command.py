@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_file
+from hframe_id.cli.outputs import check_file, check_length
 from hframe_id.errors import OptionError
 
 
@@ -235,8 +235,13 @@ def run(args: argparse.Namespace) -> int:
     rig = make_rig(args)
     try:
         protocol = _protocol(args, len(rig.info.inputs))
+        period = rig.info.sample_period_s
+        duration = protocol.duration_s
+        if duration is None:  # a sequence: its last row plus one sample
+            duration = protocol.time_s[-1] + period
+        check_length(duration, period, "--duration" if args.duration else f"--{args.protocol}")
         low, high = rig.info.sensors.dac_min_v, rig.info.sensors.dac_max_v
-        clamps = clamped(protocol.table(rig.info.sample_period_s), rig.info.inputs, low, high)
+        clamps = clamped(protocol.table(period), rig.info.inputs, low, high)
         for clamp in clamps:
             print(f"hframe-id: warning: {_clamp_sentence(clamp, low, high)}", file=sys.stderr)
         attachments = []

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_dir, check_file
+from hframe_id.cli.outputs import check_dir, check_file, check_length
 from hframe_id.errors import OptionError
 
 if TYPE_CHECKING:  # imported when a simulation runs, not for --help
@@ -131,6 +131,7 @@ def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float,
         from hframe_id.rig.protocols import load_sequence_csv
 
         protocol = load_sequence_csv(args.csv, args.duration)
+        check_length(protocol.duration_s or protocol.time_s[-1] + dt, dt, "--csv")
         if protocol.n_inputs != n_inputs:
             raise OptionError(
                 f"{args.csv}: {protocol.n_inputs} voltage column(s), the model has {n_inputs}"
@@ -138,6 +139,7 @@ def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float,
         return protocol.table(dt), dt, f"sequence {args.csv.name}"
     if args.duration is None:
         raise OptionError("--step needs --duration (simulated time [s])")
+    check_length(args.duration, dt, "--duration")
     steps = [MotorStep.parse(text) for text in args.step]
     return step_inputs(steps, n_inputs, args.duration, dt), dt, "steps " + " ".join(args.step)
 
