@@ -159,6 +159,8 @@ OTHER = {
                              "--out", "{out}/s.csv"),
     "record-csv-longseq": ("record", "--rig", "sim", "--params", str(H8), "--protocol", "csv",
                            "--csv", "{in}/longseq.csv", "--fast", "--out", "{out}/r.mcap"),
+    "control-settle-1e9": ("control", "--params", str(H8), "--kp", "150", "--settle", "1e9"),
+    "control-v-max-1e-9": ("control", "--params", str(H8), "--kp", "150", "--v-max", "1e-9"),
     # unwritable outputs
     "simulate-out-proc": ("simulate", "--params", str(H8), "--step", "1,4", "--duration", "0.05",
                           "--out", "/proc/nope.csv"),

@@ -13,7 +13,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hframe_id.cli.outputs import check_dir, check_file
+from hframe_id.cli.outputs import check_dir, check_file, check_length
 from hframe_id.control.trajectory import (
     SQUARE_F_A,
     SQUARE_SIDE_M,
@@ -173,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
 
     controller = _controller(args)
     trajectory = build_trajectory(args)
+    check_length(trajectory.end_time_s, controller.sample_period_s, "trajectory")
     workspace = Workspace(*args.workspace) if args.workspace else Workspace()
     workspace.check(trajectory)
     friction = FrictionOptions(args.friction)
