@@ -234,8 +234,10 @@ def run(args: argparse.Namespace) -> int:
 
     rig = make_rig(args)
     try:
-        protocol = _protocol(args, len(rig.info.inputs))
         period = rig.info.sample_period_s
+        if args.protocol == "multisine":  # its components are laid out over one --period
+            check_length(args.period, period, "--period")
+        protocol = _protocol(args, len(rig.info.inputs))
         duration = protocol.duration_s
         if duration is None:  # a sequence: its last row plus one sample
             duration = protocol.time_s[-1] + period
