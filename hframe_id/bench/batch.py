@@ -11,7 +11,9 @@ LocalCluster of 1 worker process and of 2, in the same run.
   gather, store written. Workers are warmed by the batch's plugin inside the timing.
 - Rounds: ``HFRAME_BENCH_BATCH_ROUNDS`` (2) rounds of the three, interleaved, the best time
   of each kept (other processes' load only ever slows a run down); the 1-minute load average
-  is printed per round.
+  is printed per round, with the median time of one task ([task ...]: reading to parameter
+  file written) in each run: tasks that take longer with 2 workers than with 1 mean the
+  workers competed for the cores.
 - Targets: 2 workers >= 1.7x one worker; Dask 1 worker within 10 % of the sequential loop.
 
 On a shared 2-core machine the second worker competes with whatever else runs; the ratios
@@ -22,41 +24,44 @@ from __future__ import annotations
 
 import contextlib
 import os
+import statistics
 import tempfile
 import time
 from pathlib import Path
 
-from distributed import Client, LocalCluster
+from distributed import Client
 
 from hframe_id.bench import heading
 from hframe_id.fleet.job import fit_kinds, run_job, warm_up
 from hframe_id.fleet.keys import batch_options, job_key, sha256_file
 from hframe_id.fleet.manifest import load_manifest
-from hframe_id.fleet.runner import run_batch
+from hframe_id.fleet.runner import local_cluster, run_batch
 from hframe_id.fleet.store import ResultsStore
 from hframe_id.fleet.synthetic import make_fleet
 
 RIGS, WEEKS, SEED = 8, 2, 11
 
 
-def _sequential(jobs, out: Path) -> float:
+def _sequential(jobs, out: Path) -> tuple[float, float]:
+    """(loop wall time [s], median task time [s])."""
     warm_up(fit_kinds(jobs))
     start = time.perf_counter()
+    tasks = []
     for job in jobs:
         digests = [sha256_file(p) for p in job.recordings]
         row = run_job(job, job_key(job, batch_options(job), digests), digests, out, False)
+        tasks.append(row["wall_time [s]"])
         if row["status"] != "ok":
             print(f"  sequential: {job.rig} {row['status']}: {row['message']}")
-    return time.perf_counter() - start
+    return time.perf_counter() - start, statistics.median(tasks)
 
 
-def _dask(jobs, workers: int, out: Path) -> tuple[float, float]:
-    """(cluster start [s], batch wall time [s]) on a LocalCluster of ``workers``."""
+def _dask(jobs, workers: int, out: Path) -> tuple[float, float, float]:
+    """(cluster start [s], batch wall time [s], median task time on a worker [s]) on a
+    LocalCluster of ``workers``."""
     start = time.perf_counter()
     with (
-        LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
-        ) as cluster,
+        local_cluster(workers) as cluster,
         Client(cluster) as client,
     ):
         client.wait_for_workers(workers)
@@ -67,13 +72,14 @@ def _dask(jobs, workers: int, out: Path) -> tuple[float, float]:
         )
     if summary.stored.get("ok") != len(jobs):
         print(f"  dask {workers}: {summary.line()}")
-    return started, summary.wall_time_s
+    return started, summary.wall_time_s, float(store.frame()["wall_time [s]"].median())
 
 
 def run() -> None:
     heading(f"Batch fits on Dask ({RIGS * WEEKS} fits: {RIGS} rigs x {WEEKS} weeks)")
     rounds = int(os.environ.get("HFRAME_BENCH_BATCH_ROUNDS", "2"))
     times: dict[str, list[float]] = {"sequential": [], "Dask 1": [], "Dask 2": []}
+    tasks: dict[str, list[float]] = {name: [] for name in times}
     with tempfile.TemporaryDirectory(prefix="hframe-bench-batch-") as tmp:
         root = Path(tmp)
         start = time.perf_counter()
@@ -81,12 +87,18 @@ def run() -> None:
         print(f"fleet recorded in {time.perf_counter() - start:.1f} s", flush=True)
         for r in range(rounds):
             load = os.getloadavg()[0]
-            times["sequential"].append(_sequential(jobs, root / f"{r}-sequential"))
-            line = f"round {r + 1}: sequential {times['sequential'][-1]:5.1f} s"
+            elapsed, task = _sequential(jobs, root / f"{r}-sequential")
+            times["sequential"].append(elapsed)
+            tasks["sequential"].append(task)
+            line = f"round {r + 1}: sequential {elapsed:5.1f} s [task {task:.2f} s]"
             for workers in (1, 2):
-                started, elapsed = _dask(jobs, workers, root / f"{r}-dask-{workers}")
+                started, elapsed, task = _dask(jobs, workers, root / f"{r}-dask-{workers}")
                 times[f"Dask {workers}"].append(elapsed)
-                line += f", Dask {workers} worker(s) {elapsed:5.1f} s (+{started:.1f} s start)"
+                tasks[f"Dask {workers}"].append(task)
+                line += (
+                    f", Dask {workers} worker(s) {elapsed:5.1f} s [task {task:.2f} s] "
+                    f"(+{started:.1f} s start)"
+                )
             print(f"{line}; load average {load:.1f} -> {os.getloadavg()[0]:.1f}", flush=True)
     best = {name: min(values) for name, values in times.items()}
     n = len(jobs)
@@ -98,4 +110,9 @@ def run() -> None:
     speedup = best["Dask 1"] / best["Dask 2"]
     print(f"Dask 1 worker vs sequential: {100 * overhead:+.1f} % (target <= +10 %)")
     print(f"2 workers vs 1 worker: {speedup:.2f}x (target >= 1.7x)")
+    slowdown = min(tasks["Dask 2"]) / min(tasks["Dask 1"])
+    print(
+        f"median task time, 2 workers against 1: {slowdown:.2f}x (1.0 with a free core per "
+        "worker; about 2 when the two share one core's worth of CPU with other processes)"
+    )
     print(f"({os.cpu_count()} CPUs shared with other processes: see the load averages)")

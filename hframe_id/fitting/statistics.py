@@ -33,9 +33,9 @@ its variance (Brun et al. 2001 use the same normalisation).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
-from scipy.stats import norm
 
 #: Bandwidth rule of the HAC estimator (samples): factor on the decorrelation lag, floor.
 BANDWIDTH_FACTOR = 2.0
@@ -77,7 +77,7 @@ class Statistics:
 
     def z_value(self, confidence: float) -> float:
         """Two-sided normal quantile of ``confidence`` (1.96 for 95 %)."""
-        return float(norm.ppf(0.5 + confidence / 2))
+        return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
 def _bartlett_smooth(g: np.ndarray, bandwidth: int) -> np.ndarray:
