@@ -1,5 +1,10 @@
 """The fleet report: each parameter over time per rig with its 95 % intervals, and the drift
-flags (``hframe_id.fleet.drift``) as a table, a markdown page and JSON."""
+flags (``hframe_id.fleet.drift``) as a table, a markdown page and JSON.
+
+Figures are ``matplotlib.figure.Figure`` objects drawn by the Agg canvas (matplotlib imported
+inside :func:`plot_histories`), as in ``hframe_id.fitting.report``: importing this module sets
+no backend and no global state.
+"""
 
 from __future__ import annotations
 
@@ -7,14 +12,10 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from hframe_id.atomic import replace_atomically, staged_directory  # noqa: E402
-from hframe_id.fleet.drift import Drift, parameters_of, successful  # noqa: E402
+from hframe_id.atomic import replace_atomically, staged_directory
+from hframe_id.fleet.drift import Drift, parameters_of, successful
 
 JSON_FORMAT_VERSION = "1.0"
 
@@ -23,6 +24,9 @@ def plot_histories(frame: pd.DataFrame, threshold: float, out: Path) -> list[Pat
     """One PNG per parameter in ``out`` (replaced as a whole): per rig, the estimate's change
     against the rig's first successful run [%] over run time, with its 95 % interval as error
     bars and the drift threshold as dashed lines."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     ok = successful(frame)
     names = []
     if out.exists():
@@ -30,7 +34,9 @@ def plot_histories(frame: pd.DataFrame, threshold: float, out: Path) -> list[Pat
     with staged_directory(out) as staging:
         for name, unit in parameters_of(ok):
             value = f"{name} [{unit}]"
-            fig, ax = plt.subplots(figsize=(7, 3.5))
+            fig = Figure(figsize=(7, 3.5))
+            FigureCanvasAgg(fig)
+            ax = fig.subplots()
             for rig, runs in ok[ok[value].notna()].groupby("rig", sort=True):
                 base = runs[value].iloc[0]
                 change = 100 * (runs[value] / base - 1)
@@ -53,7 +59,6 @@ def plot_histories(frame: pd.DataFrame, threshold: float, out: Path) -> list[Pat
             fig.autofmt_xdate()
             fig.tight_layout()
             fig.savefig(staging / f"{name}.png", dpi=90)
-            plt.close(fig)
             names.append(f"{name}.png")
     return [out / n for n in names]
 
