@@ -1,5 +1,10 @@
 """Run every benchmark section: ``python -m hframe_id.bench [SECTION ...] [--no-realistic |
---realistic-only] [--realistic-repeats N]``."""
+--realistic-only] [--realistic-repeats N] [--fit-starts N] [--fd-starts N]
+[--baseline-max-s S] [--batch-rounds N]``.
+
+The sizes of the runs are options here and are passed to the sections' ``run``; no section
+reads the environment.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +14,34 @@ import platform
 import sys
 
 #: Section modules under hframe_id.bench; each has ``run()`` that prints its results (the
-#: fitting section takes the keyword options built from the flags in ``main``).
+#: fitting and batch sections take the keyword options built from the flags in ``main``).
 SECTIONS: tuple[str, ...] = ("cli", "simulation", "logging", "fitting", "batch")
+
+
+def _count(minimum: int):
+    """An argparse type: an integer >= ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+def _seconds(text: str) -> float:
+    """An argparse type: a finite time > 0 [s]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite time > 0 s, got {text}")
+    return value
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,6 +71,32 @@ def main(argv: list[str] | None = None) -> int:
         help="fitting section: timed runs of the realistic fit, median reported (default 1; "
         "30-60 s each on a quiet machine, ~95 s under load)",
     )
+    parser.add_argument(
+        "--fit-starts",
+        type=_count(1),
+        metavar="N",
+        help="fitting section: seeded starts for the fitter and the SciPy baseline (default 6)",
+    )
+    parser.add_argument(
+        "--fd-starts",
+        type=_count(0),
+        metavar="N",
+        help="fitting section: starts (the first N, at most --fit-starts) for the baseline's "
+        "finite-difference variant (default 2; 0 skips it)",
+    )
+    parser.add_argument(
+        "--baseline-max-s",
+        type=_seconds,
+        metavar="S",
+        help="fitting section: wall-time cap of one baseline run [s] (default 150)",
+    )
+    parser.add_argument(
+        "--batch-rounds",
+        type=_count(1),
+        metavar="N",
+        help="batch section: interleaved rounds of sequential, Dask 1 and Dask 2 workers, "
+        "the best time of each kept (default 2)",
+    )
     args = parser.parse_args(argv)
     print(
         f"# hframe-id benchmarks ({platform.processor() or platform.machine()}, "
@@ -48,9 +105,20 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [name for name in args.sections if name not in SECTIONS]
     if unknown:
         parser.error(f"unknown section(s) {unknown}; valid: {', '.join(SECTIONS)}")
-    options = {
-        "fitting": {"realistic": args.realistic, "realistic_repeats": args.realistic_repeats}
+    # Sizes left unset keep the section's own default (its module constants).
+    sizes = {
+        "fitting": {
+            "n_starts": args.fit_starts,
+            "fd_starts": args.fd_starts,
+            "baseline_max_time_s": args.baseline_max_s,
+        },
+        "batch": {"rounds": args.batch_rounds},
     }
+    options = {
+        name: {key: value for key, value in given.items() if value is not None}
+        for name, given in sizes.items()
+    }
+    options["fitting"].update(realistic=args.realistic, realistic_repeats=args.realistic_repeats)
     for name in args.sections or SECTIONS:
         importlib.import_module(f"hframe_id.bench.{name}").run(**options.get(name, {}))
     return 0

@@ -9,11 +9,11 @@ LocalCluster of 1 worker process and of 2, in the same run.
 - Dask: ``run_batch`` with a fresh store on a running LocalCluster of single-threaded worker
   processes (started before the timing; its start is reported on its own): submit, fit,
   gather, store written. Workers are warmed by the batch's plugin inside the timing.
-- Rounds: ``HFRAME_BENCH_BATCH_ROUNDS`` (2) rounds of the three, interleaved, the best time
-  of each kept (other processes' load only ever slows a run down); the 1-minute load average
-  is printed per round, with the median time of one task ([task ...]: reading to parameter
-  file written) in each run: tasks that take longer with 2 workers than with 1 mean the
-  workers competed for the cores.
+- Rounds: ``rounds`` (``python -m hframe_id.bench batch --batch-rounds N``, default 2)
+  rounds of the three, interleaved, the best time of each kept (other processes' load only
+  ever slows a run down); the 1-minute load average is printed per round, with the median
+  time of one task ([task ...]: reading to parameter file written) in each run: tasks that
+  take longer with 2 workers than with 1 mean the workers competed for the cores.
 - Targets: 2 workers >= 1.7x one worker; Dask 1 worker within 10 % of the sequential loop.
 
 On a shared 2-core machine the second worker competes with whatever else runs; the ratios
@@ -40,6 +40,8 @@ from hframe_id.fleet.store import ResultsStore
 from hframe_id.fleet.synthetic import make_fleet
 
 RIGS, WEEKS, SEED = 8, 2, 11
+#: Default rounds (``--batch-rounds``).
+ROUNDS = 2
 
 
 def _sequential(jobs, out: Path) -> tuple[float, float]:
@@ -75,9 +77,11 @@ def _dask(jobs, workers: int, out: Path) -> tuple[float, float, float]:
     return started, summary.wall_time_s, float(store.frame()["wall_time [s]"].median())
 
 
-def run() -> None:
+def run(rounds: int = ROUNDS) -> None:
+    """Time the batch ``rounds`` times (interleaved) and print the best of each way."""
+    if rounds < 1:
+        raise ValueError(f"rounds must be >= 1, got {rounds}")
     heading(f"Batch fits on Dask ({RIGS * WEEKS} fits: {RIGS} rigs x {WEEKS} weeks)")
-    rounds = int(os.environ.get("HFRAME_BENCH_BATCH_ROUNDS", "2"))
     times: dict[str, list[float]] = {"sequential": [], "Dask 1": [], "Dask 2": []}
     tasks: dict[str, list[float]] = {name: [] for name in times}
     with tempfile.TemporaryDirectory(prefix="hframe-bench-batch-") as tmp:

@@ -12,11 +12,12 @@ at least 15x faster than a fair SciPy single-shooting baseline measured in the s
   log-uniformly from [1/3, 3], seeded; fitter and baseline start from the same points.
 - Baseline: :func:`hframe_id.fitting.baseline_scipy.fit_single_shooting` with its defaults
   (``least_squares`` trf on log parameters, exact compiled forward sensitivities, the fitter's
-  bounds and substep rule), capped at ``BASELINE_MAX_TIME_S`` and ``BASELINE_MAX_NFEV``; a
+  bounds and substep rule), capped at ``baseline_max_time_s`` and ``BASELINE_MAX_NFEV``; a
   capped run counts as not converged and its time is a lower bound. Its finite-difference
-  variant (what a SciPy user without AD writes) runs from the first ``FD_STARTS`` starts.
-- Sizes: ``HFRAME_BENCH_FIT_STARTS`` (6), ``HFRAME_BENCH_FD_STARTS`` (2) and
-  ``HFRAME_BENCH_BASELINE_MAX_S`` (150) in the environment; about 5-15 minutes in all.
+  variant (what a SciPy user without AD writes) runs from the first ``fd_starts`` starts.
+- Sizes: ``n_starts`` (6), ``fd_starts`` (2) and ``baseline_max_time_s`` (150 s), set by
+  ``python -m hframe_id.bench --fit-starts N --fd-starts N --baseline-max-s S``; about 5-15
+  minutes in all.
 - Converged: the solver reports success and every free parameter is within 1 % of the truth
   (the issue's recovery tolerance).
 - Record length: the fitter on the same six experiments tiled to 2x and 4x samples (the
@@ -39,7 +40,6 @@ on a shared 2-core machine are noisy; the ratios in one run are the result.
 
 from __future__ import annotations
 
-import os
 import statistics
 import time
 from dataclasses import replace
@@ -80,9 +80,10 @@ START_FACTOR = 3.0
 RECOVERY_TOL = 0.01
 SPEED_TARGET_S = 10.0
 RATIO_TARGET = 15.0
-N_STARTS = int(os.environ.get("HFRAME_BENCH_FIT_STARTS", "6"))
-FD_STARTS = min(N_STARTS, int(os.environ.get("HFRAME_BENCH_FD_STARTS", "2")))
-BASELINE_MAX_TIME_S = float(os.environ.get("HFRAME_BENCH_BASELINE_MAX_S", "150"))
+#: Defaults of ``run`` (``--fit-starts``, ``--fd-starts``, ``--baseline-max-s``).
+N_STARTS = 6
+FD_STARTS = 2
+BASELINE_MAX_TIME_S = 150.0
 BASELINE_MAX_NFEV = 400
 LENGTHS = (1, 2, 4)
 MATCHED_REPEATS = 3
@@ -120,9 +121,9 @@ def _shipped(truth: ParameterSet) -> tuple[list[Recording], str]:
     return _simulated(truth, 1), f"simulated from {truth.path.name} (shipped files missing)"
 
 
-def _starts(truth: ParameterSet, names: tuple[str, ...]) -> list[ParameterSet]:
+def _starts(truth: ParameterSet, names: tuple[str, ...], n_starts: int) -> list[ParameterSet]:
     starts = []
-    for i in range(N_STARTS):
+    for i in range(n_starts):
         rng = np.random.default_rng(2025 + i)
         factors = np.exp(rng.uniform(-np.log(START_FACTOR), np.log(START_FACTOR), len(names)))
         starts.append(
@@ -216,33 +217,60 @@ def _summary(label: str, runs: list[dict], fit_times: list[float]) -> None:
     print(line)
 
 
-def run(realistic: str = "yes", realistic_repeats: int = REALISTIC_REPEATS) -> None:
-    """``realistic``: "yes" (the realistic vs matched comparison after the rest), "no" (skip
-    it) or "only" (nothing else); ``realistic_repeats``: timed runs of the realistic fit."""
+def run(
+    realistic: str = "yes",
+    realistic_repeats: int = REALISTIC_REPEATS,
+    n_starts: int = N_STARTS,
+    fd_starts: int = FD_STARTS,
+    baseline_max_time_s: float = BASELINE_MAX_TIME_S,
+) -> None:
+    """Print the fitting benchmarks.
+
+    Parameters
+    ----------
+    realistic
+        "yes" (the realistic vs matched comparison after the rest), "no" (skip it) or "only"
+        (nothing else).
+    realistic_repeats
+        Timed runs of the realistic fit.
+    n_starts
+        Seeded starts (>= 1) for the fitter and the baseline.
+    fd_starts
+        Starts (>= 0; the first ones, at most ``n_starts``) for the baseline's
+        finite-difference variant.
+    baseline_max_time_s
+        Wall-time cap of one baseline run [s].
+    """
+    if realistic not in ("yes", "no", "only"):
+        raise ValueError(f"realistic must be 'yes', 'no' or 'only', got {realistic!r}")
+    if n_starts < 1 or fd_starts < 0:
+        raise ValueError(f"need n_starts >= 1 and fd_starts >= 0, got {n_starts}, {fd_starts}")
+    if not baseline_max_time_s > 0:
+        raise ValueError(f"baseline_max_time_s must be > 0 s, got {baseline_max_time_s}")
     if realistic != "only":
-        _versus_baseline()
+        _versus_baseline(n_starts, min(fd_starts, n_starts), baseline_max_time_s)
     if realistic != "no":
         _realistic_vs_matched(realistic_repeats)
 
 
-def _versus_baseline() -> None:
+def _versus_baseline(n_starts: int, fd_starts: int, baseline_max_time_s: float) -> None:
     heading("Fitting: multiple shooting vs SciPy single shooting (hframe-8, six experiments)")
     truth = _truth()
     names = default_free_names("hframe-8")
     recordings, source = _shipped(truth)
-    starts = _starts(truth, names)
+    starts = _starts(truth, names, n_starts)
     n_samples = sum(r.n_samples for r in recordings)
     print(f"data: {source}; {len(recordings)} experiments, {n_samples} samples at 1 kHz")
     print(f"truth: {truth.path.name}; {len(names)} free parameters: {', '.join(names)}")
     print(
         f"starts: truth x random factors in [1/{START_FACTOR:g}, {START_FACTOR:g}] "
-        f"(log-uniform, seeds 2025..{2024 + N_STARTS}); converged = solver success and every "
+        f"(log-uniform, seeds 2025..{2024 + n_starts}); converged = solver success and every "
         f"parameter within {RECOVERY_TOL:.0%} of the truth"
     )
     print(
         f"baseline: scipy least_squares trf, log parameters, noise-scaled residuals, exact "
         f"compiled forward sensitivities (FD variant below); capped at "
-        f"{BASELINE_MAX_TIME_S:g} s / {BASELINE_MAX_NFEV} evaluations"
+        f"{baseline_max_time_s:g} s / {BASELINE_MAX_NFEV} evaluations"
     )
     timings = evaluation_timings(recordings, starts[0], names)
     print(
@@ -254,7 +282,7 @@ def _versus_baseline() -> None:
     fitter = _fitter()
     if fitter is None:
         print("fitter: hframe_id.fitting.fit_recordings is not available yet; baseline only")
-    options = BaselineOptions(max_time_s=BASELINE_MAX_TIME_S, max_nfev=BASELINE_MAX_NFEV)
+    options = BaselineOptions(max_time_s=baseline_max_time_s, max_nfev=BASELINE_MAX_NFEV)
     print()
     print(
         "| start | fitter [s] | conv | worst error          | baseline [s] | conv | "
@@ -286,17 +314,17 @@ def _versus_baseline() -> None:
     _summary("baseline", base_runs, fit_times)
     print(f"          (target: fitter at least {RATIO_TARGET:g}x faster; capped runs: lower bound)")
 
-    if FD_STARTS > 0:
+    if fd_starts > 0:
         print()
         print(
             f"finite-difference variant of the baseline (forward differences, step 1e-6 in log "
-            f"parameters, all 17 simulations per Jacobian batched), starts 0..{FD_STARTS - 1}:"
+            f"parameters, all 17 simulations per Jacobian batched), starts 0..{fd_starts - 1}:"
         )
         print("| start | time [s] | conv | worst error          | nfev/njev | stop |")
         print("|---|---|---|---|---|---|")
         fd_options = replace(options, jacobian="finite-differences")
         fd_runs = []
-        for i, start in enumerate(starts[:FD_STARTS]):
+        for i, start in enumerate(starts[:fd_starts]):
             b = _baseline_run(recordings, start, names, fd_options, truth)
             fd_runs.append(b)
             print(
