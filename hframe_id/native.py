@@ -66,13 +66,50 @@ class CacheInfo:
 _warned = False
 
 
-def cache_root() -> Path:
-    """The hframe-id cache folder: ``$HFRAME_ID_CACHE`` or ``$XDG_CACHE_HOME/hframe-id``."""
+@dataclass(frozen=True)
+class NativeSettings:
+    """Where compiled code is cached and which compilers are tried, in order."""
+
+    cache_root: Path
+    compilers: tuple[str, ...]
+
+
+def settings() -> NativeSettings:
+    """The user's settings for native code, read from the environment at each call.
+
+    This is the only function below the command line that reads environment variables, and
+    it reads only these three on purpose:
+
+    - ``CC`` (compiler; else ``cc``, else ``gcc``) and ``XDG_CACHE_HOME`` (cache base; else
+      ``~/.cache``) are the platform's conventions, which every tool that compiles or caches
+      reads where it does so (make, setuptools, pip, matplotlib);
+    - ``HFRAME_ID_CACHE`` overrides the folder (``$HFRAME_ID_CACHE``, else
+      ``$XDG_CACHE_HOME/hframe-id``) in the same way ``PIP_CACHE_DIR`` or ``MPLCONFIGDIR``
+      do.
+
+    Native code is built wherever a model is first evaluated: by the command line, by the
+    Python API, in test processes and in Dask worker processes on other machines (which share
+    the environment, not the objects, of the process that started them: docs/fleet.md). A
+    settings object resolved once in the CLI would have to be passed through every simulator,
+    the closed loop, the prediction and the fitter's kernel and would still miss library
+    users and workers; reading at the point of use, in this one function, does not. Nothing
+    is read at import, and nothing is kept between calls (a changed environment applies to
+    the next build).
+    """
     root = os.environ.get("HFRAME_ID_CACHE")
     if root:
-        return Path(root)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "hframe-id"
+        cache = Path(root)
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+        cache = Path(base) / "hframe-id"
+    cc = os.environ.get("CC")
+    return NativeSettings(cache_root=cache, compilers=(cc, "cc", "gcc") if cc else ("cc", "gcc"))
+
+
+def cache_root() -> Path:
+    """The hframe-id cache folder: ``$HFRAME_ID_CACHE`` or ``$XDG_CACHE_HOME/hframe-id``
+    (:func:`settings`)."""
+    return settings().cache_root
 
 
 def cache_directory() -> Path:
@@ -98,9 +135,9 @@ def _compiler_identity(name: str) -> tuple[str, str] | None:
 
 
 def compiler() -> tuple[str, str] | None:
-    """(path, version) of the C compiler used (``$CC``, ``cc`` or ``gcc``), None if none runs."""
-    names = [os.environ["CC"]] if os.environ.get("CC") else []
-    for name in (*names, "cc", "gcc"):
+    """(path, version) of the C compiler used (``$CC``, ``cc`` or ``gcc``: :func:`settings`),
+    None if none runs."""
+    for name in settings().compilers:
         identity = _compiler_identity(name)
         if identity is not None:
             return identity
