@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions
-from hframe_id.fitting.equation_error import equation_error_start
+from hframe_id.fitting.equation_error import equation_error_start, savgol_derivative
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton
@@ -168,3 +168,19 @@ def test_noise_model_errors_reproduce_quantization():
     # in a fit) plus an error of std 1 (uniform quantization).
     assert np.std(errors - errors.mean(axis=0), axis=0) == pytest.approx(1.0, abs=0.05)
     assert np.std(errors.mean(axis=0)) == pytest.approx(1.0, abs=0.3)
+
+
+@pytest.mark.parametrize("window", [5, 11])
+@pytest.mark.parametrize("deriv", [1, 2])
+def test_savitzky_golay_derivative_is_scipy_bit_for_bit_in_the_interior(window, deriv):
+    """Bitwise, not within a tolerance: the equation-error start feeds a fit whose path can
+    turn on the last bit (a 1e-14 change of these derivatives was measured to move the
+    identifiability test's fit to another stall)."""
+    from scipy.signal import savgol_filter
+
+    y = np.cumsum(np.random.default_rng(0).normal(size=2000)) * 1e-3
+    half = window // 2
+    expected = savgol_filter(y, window, 3, deriv=deriv, delta=1e-3)[half:-half]
+    np.testing.assert_array_equal(
+        savgol_derivative(y, window, 3, deriv, 1e-3)[half:-half], expected
+    )
