@@ -208,3 +208,14 @@ def test_the_report_says_when_parameters_move_more_than_their_intervals():
     assert "F_c (5x)" in sentence and "M (" not in sentence
     table = LeaveOneOutTable(("x",), (), (spread("M", 0.01),))
     assert _jackknife_sentence(result, table) == []
+
+
+def test_allowed_outside_is_the_binomial_quantile():
+    """Exact integers: the 0.99 quantile of Binomial(n, 0.01) as scipy.stats computes it, for
+    every lag count from 0 to 3000 and two far beyond any correlation plot (10^5, 10^6)."""
+    from scipy import stats
+
+    from hframe_id.validation.residuals import allowed_outside
+
+    for n in [*range(3001), 10**5, 10**6]:
+        assert allowed_outside(n) == int(stats.binom.ppf(0.99, n, 0.01)), n
