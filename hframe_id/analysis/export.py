@@ -37,19 +37,20 @@ import io
 import json
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.io
 
 from hframe_id import __version__
-from hframe_id.analysis.linear import LinearModel, linearize, natural_frequency_and_damping
+from hframe_id.analysis.formats import FORMATS, ExportFormat
 from hframe_id.atomic import replace_atomically
 from hframe_id.errors import ModelError, OptionError
 from hframe_id.models import parameter_specs
 from hframe_id.parameters import ParameterSet
+
+if TYPE_CHECKING:
+    from hframe_id.analysis.linear import LinearModel
 
 #: Units of the pole-zero report.
 POLE_ZERO_UNITS = {
@@ -57,43 +58,6 @@ POLE_ZERO_UNITS = {
     "zeros": "rad/s",
     "natural_frequencies": "rad/s",
     "damping": "1",
-}
-
-
-@dataclass(frozen=True)
-class ExportFormat:
-    """One ``hframe-id export`` format.
-
-    ``kind`` is ``"parameters"`` or ``"statespace"``; ``binary`` formats need an output file.
-    """
-
-    name: str
-    kind: str
-    binary: bool
-    suffix: str
-    description: str
-
-
-FORMATS: dict[str, ExportFormat] = {
-    f.name: f
-    for f in (
-        ExportFormat("json", "parameters", False, ".json", "parameters: name, unit, value (JSON)"),
-        ExportFormat("csv", "parameters", False, ".csv", "parameters: name,unit,value,description"),
-        ExportFormat(
-            "statespace", "statespace", False, ".json", "A, B, C, D with names and units (JSON)"
-        ),
-        ExportFormat("matlab", "statespace", True, ".mat", "MAT-file: A, B, C, D, names, units"),
-        ExportFormat(
-            "matlab-script", "statespace", False, ".m", "MATLAB script building sys = ss(...)"
-        ),
-        ExportFormat(
-            "python-control",
-            "statespace",
-            False,
-            ".py",
-            "Python module whose ss() returns a python-control StateSpace",
-        ),
-    )
 }
 
 
@@ -244,6 +208,8 @@ def mat_bytes(params: ParameterSet, lin: LinearModel) -> bytes:
         "generator": f"hframe-id {__version__}",
     }
     buffer = io.BytesIO()
+    import scipy.io  # here: 0.2 s that --help and the text formats need not pay
+
     scipy.io.savemat(buffer, contents, format="5", oned_as="column")
     return buffer.getvalue()
 
@@ -334,6 +300,8 @@ def _complex_list(values: np.ndarray) -> list[list[float]]:
 
 
 def _frequencies(values: np.ndarray) -> dict[str, list[float]]:
+    from hframe_id.analysis.linear import natural_frequency_and_damping
+
     pairs = natural_frequency_and_damping(values)
     return {
         "natural_frequencies": [omega for omega, _ in pairs],
@@ -354,6 +322,8 @@ def pole_zero_report(
     every selected pair's zeros. Natural frequencies [rad/s] and damping ratios are given for
     poles and zeros alike.
     """
+    from hframe_id.analysis.linear import linearize
+
     lin = lin or linearize(params)
     inputs = list(inputs) if inputs else list(lin.inputs)
     outputs = list(outputs) if outputs else list(lin.outputs)
@@ -405,6 +375,8 @@ def render(params: ParameterSet, fmt: str | ExportFormat) -> str | bytes:
         return parameters_json(params)
     if fmt.name == "csv":
         return parameters_csv(params)
+    from hframe_id.analysis.linear import linearize
+
     lin = linearize(params)
     return {
         "statespace": statespace_json,

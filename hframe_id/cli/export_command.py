@@ -10,7 +10,7 @@ from hframe_id.errors import OptionError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from hframe_id.analysis.export import FORMATS  # the formats' descriptions, for --help
+    from hframe_id.analysis.formats import FORMATS
 
     formats = "; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
     parser = subparsers.add_parser(
