@@ -15,7 +15,9 @@ Stages (``docs/fitting.md`` has the measurements behind each choice):
 3. every window, every sample with the substeps the stiffest window needs (the discretization
    of a simulation), nodes at rest filled by simulating the fitted model;
 4. statistics at the optimum; free parameters whose relative standard error exceeds the
-   identifiability threshold are held at their initial value and stages 2-3 re-run.
+   identifiability threshold are held at their initial value and stages 2-3 re-run; for
+   each held parameter :mod:`hframe_id.fitting.design_advice` names the standard
+   experiments that would identify it.
 
 A model with a coordinate no output measures (one-axis: the idler) first tries all this with
 the node states estimated at the parameters held (a state-estimation pre-pass), and if that
@@ -35,7 +37,7 @@ import numpy as np
 
 from hframe_id.errors import FitError
 from hframe_id.fitting.consider import consider_covariance
-from hframe_id.fitting.designs import standard_designs
+from hframe_id.fitting.design_advice import identifying_designs
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
 from hframe_id.fitting.options import (
@@ -81,10 +83,9 @@ MISMATCH_RMS = 3.0
 DEFERRED_STAGE = "all windows: deferred to the noise rounds"
 #: Warm-started noise rounds also stop once an iteration lowers the cost by less than this
 #: (relative): at their costs (~N / 2 ~ 1e4, N valid samples) that is ~0.01 in chi^2 / 2
-#: units, 1 % of the statistical resolution (1 unit). Under model mismatch the monotone
-#: trust region otherwise crawls for 150 iterations with steps of 1e-6 (the l1 merit is not
-#: smooth where defects change sign), never taking the full step that ends a stage
-#: (1e-7 still let the shipped realistic plant crawl to the iteration limit).
+#: units, 1 % of the statistical resolution (1 unit). Without it the monotone trust region
+#: can crawl under model mismatch (the l1 merit is not smooth where defects change sign;
+#: docs/fitting.md, "Model mismatch").
 WARM_COST_RTOL = 1e-6
 MAX_NOISE_ROUNDS = 5
 NOISE_RTOL = 0.05
@@ -426,9 +427,8 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
             ms, state.nodes, state.theta, state.active, stages, counter, progress, label
         )
     # No identifiability holds here: holding a parameter at its initial value moves the
-    # others away from the best approximation (measured on the realistic rig: each hold
-    # raised the cost, 1e4 -> 1e6 after seven). Poorly determined parameters are reported
-    # as such (``_result``), at their estimates.
+    # others away from the best approximation (docs/fitting.md, "Model mismatch"). Poorly
+    # determined parameters are reported as such (``_result``), at their estimates.
     return problem, ms, (state, gn, _stats(gn, state, problem), {}), rounds
 
 
@@ -511,14 +511,14 @@ def _restarts_along_unmeasured_springs(
 ):
     """Restarts with each free stiffness of a belt section at an unmeasured pulley moved by
     x/÷ each of ``RESTART_FACTORS``; keeps the lowest converged cost, repeated while it
-    improves. Also run when the fit has not converged: a converged restart replaces it.
+    improves (at most ``RESTART_LIMIT`` solves). Also run when the fit has not converged: a
+    converged restart replaces it.
 
-    Why: the unmeasured idler's mode (~170 Hz, set by k2 + k3) makes the output error
-    multimodal along those stiffnesses, like a sinusoid's frequency. Profile of one-axis
-    study seed 4 (k2 held, the rest refitted): cost 735 at the truth, local optima at
-    k2 x1.2 (790), x1.95 (752), x2.3 (768). Without restarts, from starts off by x/÷1.1,
-    seed 4 stopped at k2 +19 % (9 of 10 right); with them 10 of 10, from Table 2.3 9 of 10,
-    from x/÷3 6 of 10 (docs/fitting.md). Each restart costs one ``_solve`` (~1 s).
+    The unmeasured idler's mode (set by k2 + k3 against J_2) makes the output error
+    multimodal along those stiffnesses, as a sinusoid's frequency is; each restart is one
+    ``_solve`` from the fit's end point with one stiffness moved. docs/fitting.md, "One-axis",
+    has the cost profile and what the restarts change. Returns (state, solver, statistics,
+    held) like ``_attempt``.
     """
     state, gn, stats, held = best
     springs = _springs_at_unmeasured_coordinates(problem, ms)
@@ -611,7 +611,7 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
         if prepass:
             # Judged after estimating the node states at each: from the measured nodes (an
             # unmeasured coordinate on the rigid motion) the truth itself can lose to a
-            # poorer regression (one-axis, seed 0 of the study).
+            # poorer regression (docs/fitting.md, "One-axis").
             active0 = np.ones(n_free, dtype=bool)
             trials = [
                 _estimate_states(ms, nodes, velocity, th, active0, [], progress)
@@ -775,8 +775,7 @@ def _solve(
     if prepass and moving.size:
         # The nodes at rest were simulated with the moving-window parameters, which put an
         # unmeasured pulley's stretch wherever those left it: estimate them again with the
-        # parameters held (one-axis, study seed 8 from x/÷1.05: without this the exact stage
-        # stalled and the fallback from the measured nodes ended with k2 58 % off).
+        # parameters held (docs/fitting.md, "One-axis", the second pre-pass).
         nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
     gn = GaussNewton(ms, progress, freeze_sloppy=True)
     if mismatch:
@@ -921,7 +920,9 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         )
     not_identified = tuple(n for n in problem.free_names if n in held)
     if not_identified:
-        _which_experiments(problem, ms, gn, state, stats, estimates, not_identified)
+        advice = identifying_designs(problem, ms, gn, state, stats, not_identified)
+        for name, designs in advice.items():
+            estimates[name] = replace(estimates[name], identified_by=designs)
     misfit = ms.residual_rms(state.evaluation.cost)
     too_far = misfit > options.max_misfit
     success = final.converged and not at_bound and not too_far
@@ -999,120 +1000,3 @@ def _channel_rms(ms: MultipleShooting, ev) -> dict[str, float]:
         weighted = float(np.sum(ev.residual[:, :, j][used[:, :, j]] ** 2))
         rms[name] = math.sqrt(weighted / n) * float(problem.channel_std[j]) if n else math.nan
     return rms
-
-
-def _which_experiments(problem, ms, gn, state, stats, estimates, not_identified) -> None:
-    """For each parameter the data do not identify, the standard experiments that would.
-
-    The information of a candidate experiment is computed at the fitted parameters from
-    noise-free simulated data, reduced to the parameters (its initial state eliminated), and
-    added to the data's; the parameter counts as identified if its textbook relative error,
-    scaled by the data's ratio of robust to textbook errors, is below the threshold.
-    """
-    options = problem.options
-    all_free = np.ones(len(problem.free), dtype=bool)
-    jac, _, _ = gn.condensed_jacobian(state.evaluation, state.nodes, all_free)
-    n_nuisance = ms.nx * len(problem.experiments)
-    info_data = _reduced_information(jac, n_nuisance)
-    ratio = 1.0
-    if stats.relative_std_gn.size:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratios = stats.relative_std / stats.relative_std_gn
-        ratios = ratios[np.isfinite(ratios)]
-        ratio = float(np.median(ratios)) if ratios.size else 1.0
-    ratio *= stats.noise_scale
-    p = problem.parameters(state.theta)
-    present = {e.name.removesuffix(".mcap") for e in problem.experiments}
-    candidates = []
-    for design in standard_designs(problem.model.variant, problem.sample_period_s):
-        if design.name in present:
-            continue
-        try:
-            info = _design_information(problem, design, p, state.theta)
-        except FitError:
-            continue
-        candidates.append((design.name, info))
-    index = {n: problem.free_names.index(n) for n in not_identified}
-
-    def identified_with(info: np.ndarray, name: str) -> bool:
-        cov = np.linalg.pinv(info, hermitian=True)
-        std = math.sqrt(max(cov[index[name], index[name]], 0.0)) * ratio
-        return std <= options.identifiability_threshold
-
-    for name in not_identified:
-        single = tuple(n for n, info in candidates if identified_with(info_data + info, name))
-        if not single and candidates:
-            total = info_data + sum(info for _, info in candidates)
-            single = (
-                ("all of " + ", ".join(n for n, _ in candidates),)
-                if identified_with(total, name)
-                else ()
-            )
-        estimates[name] = replace(estimates[name], identified_by=single)
-
-
-def _reduced_information(jac: np.ndarray, n_nuisance: int) -> np.ndarray:
-    info = jac.T @ jac
-    if not n_nuisance:
-        return info
-    a = info[:n_nuisance, :n_nuisance]
-    b = info[:n_nuisance, n_nuisance:]
-    return info[n_nuisance:, n_nuisance:] - b.T @ np.linalg.lstsq(a, b, rcond=None)[0]
-
-
-def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.ndarray):
-    """Reduced information about the free log-parameters of one candidate experiment."""
-    from hframe_id.recordings.sensors import SensorModel
-    from hframe_id.simulation.open_loop import simulate
-
-    rec0 = problem.experiments[0].recording
-    model = problem.model
-    rig = dict(rec0.rig)
-    sensors = SensorModel(
-        laser_min_m=float(rig.get("laser_min_m", -math.inf)),
-        laser_max_m=float(rig.get("laser_max_m", math.inf)),
-    )
-    applied = design.inputs
-    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
-        applied = SensorModel(
-            dac_bits=int(rig["dac_bits"]),
-            dac_min_v=float(rig["dac_min_v"]),
-            dac_max_v=float(rig["dac_max_v"]),
-        ).dac(design.inputs)
-    states = simulate(model, p, applied, problem.sample_period_s, smoothing=problem.smoothing)
-    outputs = np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T
-    valid = np.ones_like(outputs, dtype=bool)
-    for j, s in enumerate(model.outputs):
-        if s.unit == "m":
-            valid[:, j] = (outputs[:, j] >= sensors.laser_min_m) & (
-                outputs[:, j] <= sensors.laser_max_m
-            )
-    rec = Recording(
-        variant=rec0.variant,
-        sample_period_s=problem.sample_period_s,
-        time_s=np.arange(outputs.shape[0]) * problem.sample_period_s,
-        inputs=design.inputs,
-        input_names=rec0.input_names,
-        outputs=np.where(valid, outputs, np.nan),
-        output_names=tuple(s.name for s in model.outputs),
-        valid=valid,
-        rig=rig,
-        experiment={"design": design.name},
-    )
-    fitted = problem.initial.replace_values(
-        **{n: float(v) for n, v in zip(model.parameter_names, p, strict=True)}
-    )
-    options = FitOptions(
-        free=problem.free_names,
-        channel_std=dict(zip(problem.output_names, problem.channel_std.tolist(), strict=True)),
-        shooting_interval=problem.options.shooting_interval,
-        smoothing=problem.smoothing,
-        threads=problem.options.threads,
-    )
-    sub = build_problem([rec], fitted, options)
-    ms = MultipleShooting(sub)
-    nodes = np.array([states[k] for k in ms.window_start])
-    gn = GaussNewton(ms)
-    ev = ms.evaluate(nodes, np.zeros(len(sub.free)), sub.smoothing)
-    jac, _, _ = gn.condensed_jacobian(ev, nodes, np.ones(len(sub.free), dtype=bool))
-    return _reduced_information(jac, ms.nx)

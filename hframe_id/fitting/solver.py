@@ -56,9 +56,8 @@ STALL_NOISE_RATIO = 1.5
 FREE_STEPS = 2
 #: Fast paths (``give_up`` set) stop when the best merit has not fallen by GIVE_UP_DECREASE
 #: (relative) over ``give_up`` iterations while the residual rms is above GIVE_UP_NOISE_RATIO
-#: noise std: on the shipped data the exact stage from the equation-error start hovered at a
-#: residual rms of ~140 noise std for 30 iterations (3.5 s) before the penalty fallback fitted
-#: in 0.9 s.
+#: noise std: far from the data the exact stage can hover for many iterations where its
+#: penalty fallback fits in a fraction of the time (docs/fitting.md, "The stages", 2).
 GIVE_UP_DECREASE = 0.2
 GIVE_UP_NOISE_RATIO = 10.0
 #: Iterations over which an exact stage with ``cost_rtol`` judges the cost decrease.

@@ -1,0 +1,166 @@
+"""Experiment-design advice: which standard experiments would identify a parameter the
+fitted data do not.
+
+Called by ``fit_recordings`` for the parameters it held for identifiability; each candidate
+of :func:`hframe_id.fitting.designs.standard_designs` not already in the data is simulated at
+the fitted parameters (noise-free, through the rig's DAC and laser range), transcribed like
+the data, and its Gauss-Newton information added to the data's (docs/fitting.md,
+"Identifiability").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hframe_id.errors import FitError
+from hframe_id.fitting.designs import standard_designs
+from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.fitting.solver import GaussNewton, SolverState
+from hframe_id.fitting.statistics import Statistics
+from hframe_id.recordings.recording import Recording
+
+
+def identifying_designs(
+    problem: FitProblem,
+    ms: MultipleShooting,
+    gn: GaussNewton,
+    state: SolverState,
+    stats: Statistics,
+    not_identified: tuple[str, ...],
+) -> dict[str, tuple[str, ...]]:
+    """For each parameter the data do not identify, the standard experiments that would.
+
+    The information of a candidate experiment is computed at the fitted parameters from
+    noise-free simulated data, reduced to the parameters (its initial state eliminated), and
+    added to the data's; the parameter counts as identified if its textbook relative error,
+    scaled by the data's ratio of robust to textbook errors, is below the threshold.
+
+    Parameters
+    ----------
+    problem, ms, gn, state, stats
+        The fitted problem, its transcription, solver, final iterate and statistics.
+    not_identified
+        Free parameters held for identifiability (names).
+
+    Returns
+    -------
+    Per name in ``not_identified``: the names of the standard designs
+    (:func:`hframe_id.fitting.designs.standard_designs`) of which each alone, added to the
+    data, would identify it; else ``("all of A, B, ...",)`` if only all of them together
+    would; else ``()``.
+    """
+    options = problem.options
+    all_free = np.ones(len(problem.free), dtype=bool)
+    jac, _, _ = gn.condensed_jacobian(state.evaluation, state.nodes, all_free)
+    n_nuisance = ms.nx * len(problem.experiments)
+    info_data = _reduced_information(jac, n_nuisance)
+    ratio = 1.0
+    if stats.relative_std_gn.size:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratios = stats.relative_std / stats.relative_std_gn
+        ratios = ratios[np.isfinite(ratios)]
+        ratio = float(np.median(ratios)) if ratios.size else 1.0
+    ratio *= stats.noise_scale
+    p = problem.parameters(state.theta)
+    present = {e.name.removesuffix(".mcap") for e in problem.experiments}
+    candidates = []
+    for design in standard_designs(problem.model.variant, problem.sample_period_s):
+        if design.name in present:
+            continue
+        try:
+            info = _design_information(problem, design, p, state.theta)
+        except FitError:
+            continue
+        candidates.append((design.name, info))
+    index = {n: problem.free_names.index(n) for n in not_identified}
+
+    def identified_with(info: np.ndarray, name: str) -> bool:
+        cov = np.linalg.pinv(info, hermitian=True)
+        std = math.sqrt(max(cov[index[name], index[name]], 0.0)) * ratio
+        return std <= options.identifiability_threshold
+
+    advice = {}
+    for name in not_identified:
+        single = tuple(n for n, info in candidates if identified_with(info_data + info, name))
+        if not single and candidates:
+            total = info_data + sum(info for _, info in candidates)
+            single = (
+                ("all of " + ", ".join(n for n, _ in candidates),)
+                if identified_with(total, name)
+                else ()
+            )
+        advice[name] = single
+    return advice
+
+
+def _reduced_information(jac: np.ndarray, n_nuisance: int) -> np.ndarray:
+    """Information J^T J about the parameters (the last columns of ``jac``) with the first
+    ``n_nuisance`` columns (initial states) eliminated: the Schur complement."""
+    info = jac.T @ jac
+    if not n_nuisance:
+        return info
+    a = info[:n_nuisance, :n_nuisance]
+    b = info[:n_nuisance, n_nuisance:]
+    return info[n_nuisance:, n_nuisance:] - b.T @ np.linalg.lstsq(a, b, rcond=None)[0]
+
+
+def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.ndarray):
+    """Reduced information about the free log-parameters of one candidate experiment."""
+    from hframe_id.recordings.sensors import SensorModel
+    from hframe_id.simulation.open_loop import simulate
+
+    rec0 = problem.experiments[0].recording
+    model = problem.model
+    rig = dict(rec0.rig)
+    sensors = SensorModel(
+        laser_min_m=float(rig.get("laser_min_m", -math.inf)),
+        laser_max_m=float(rig.get("laser_max_m", math.inf)),
+    )
+    applied = design.inputs
+    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
+        applied = SensorModel(
+            dac_bits=int(rig["dac_bits"]),
+            dac_min_v=float(rig["dac_min_v"]),
+            dac_max_v=float(rig["dac_max_v"]),
+        ).dac(design.inputs)
+    states = simulate(model, p, applied, problem.sample_period_s, smoothing=problem.smoothing)
+    outputs = np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T
+    valid = np.ones_like(outputs, dtype=bool)
+    for j, s in enumerate(model.outputs):
+        if s.unit == "m":
+            valid[:, j] = (outputs[:, j] >= sensors.laser_min_m) & (
+                outputs[:, j] <= sensors.laser_max_m
+            )
+    rec = Recording(
+        variant=rec0.variant,
+        sample_period_s=problem.sample_period_s,
+        time_s=np.arange(outputs.shape[0]) * problem.sample_period_s,
+        inputs=design.inputs,
+        input_names=rec0.input_names,
+        outputs=np.where(valid, outputs, np.nan),
+        output_names=tuple(s.name for s in model.outputs),
+        valid=valid,
+        rig=rig,
+        experiment={"design": design.name},
+    )
+    fitted = problem.initial.replace_values(
+        **{n: float(v) for n, v in zip(model.parameter_names, p, strict=True)}
+    )
+    options = FitOptions(
+        free=problem.free_names,
+        channel_std=dict(zip(problem.output_names, problem.channel_std.tolist(), strict=True)),
+        shooting_interval=problem.options.shooting_interval,
+        smoothing=problem.smoothing,
+        threads=problem.options.threads,
+    )
+    sub = build_problem([rec], fitted, options)
+    ms = MultipleShooting(sub)
+    nodes = np.array([states[k] for k in ms.window_start])
+    gn = GaussNewton(ms)
+    ev = ms.evaluate(nodes, np.zeros(len(sub.free)), sub.smoothing)
+    jac, _, _ = gn.condensed_jacobian(ev, nodes, np.ones(len(sub.free), dtype=bool))
+    return _reduced_information(jac, ms.nx)
