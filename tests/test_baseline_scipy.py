@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hframe_id.errors import FitError, OptionError
-from hframe_id.fitting.baseline_scipy import (
+from hframe_id.bench.baseline_scipy import (
     BaselineOptions,
     default_free_names,
     fit_single_shooting,
 )
+from hframe_id.errors import FitError, OptionError
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 

@@ -10,7 +10,7 @@ at least 15x faster than a fair SciPy single-shooting baseline measured in the s
   simulated from that truth file.
 - Starts: every free parameter (the fitter's default set) at the truth times a factor drawn
   log-uniformly from [1/3, 3], seeded; fitter and baseline start from the same points.
-- Baseline: :func:`hframe_id.fitting.baseline_scipy.fit_single_shooting` with its defaults
+- Baseline: :func:`hframe_id.bench.baseline_scipy.fit_single_shooting` with its defaults
   (``least_squares`` trf on log parameters, exact compiled forward sensitivities, the fitter's
   bounds and substep rule), capped at ``baseline_max_time_s`` and ``BASELINE_MAX_NFEV``; a
   capped run counts as not converged and its time is a lower bound. Its finite-difference
@@ -47,7 +47,7 @@ from dataclasses import replace
 import numpy as np
 
 from hframe_id.bench import heading
-from hframe_id.fitting.baseline_scipy import (
+from hframe_id.bench.baseline_scipy import (
     BaselineOptions,
     default_free_names,
     evaluation_timings,
