@@ -86,6 +86,7 @@ class ModelDeclaration:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
+        """Names of the model's parameters, in declaration order (the order of p)."""
         return tuple(spec.name for spec in self.parameters)
 
     def default_free(self) -> tuple[str, ...]:

@@ -54,14 +54,17 @@ class Model:
 
     @property
     def n_states(self) -> int:
+        """Number of states, the length of x."""
         return len(self.states)
 
     @property
     def n_inputs(self) -> int:
+        """Number of inputs, the length of u."""
         return len(self.inputs)
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
+        """Names of the model's parameters in the order of the p vector (units in the names)."""
         return tuple(spec.name for spec in self.parameters)
 
     def parameter_vector(self, values: Mapping[str, float]) -> np.ndarray:

@@ -76,6 +76,7 @@ class ParameterSet:
         )
 
     def where(self) -> str:
+        """Where the values come from, for messages: the file, else ``<variant parameters>``."""
         return str(self.path) if self.path else f"<{self.variant} parameters>"
 
 
