@@ -46,6 +46,7 @@ class ColumnMap:
 
     @classmethod
     def parse(cls, text: str) -> ColumnMap:
+        """Parse one ``--map SOURCE=ROLE:UNIT[:NAME]`` argument; OptionError names what is wrong."""
         source, sep, spec = text.rpartition("=")
         parts = spec.split(":")
         if not sep or not source or len(parts) not in (2, 3) or not all(parts):
@@ -156,9 +157,12 @@ class ImportSpec:
             raise OptionError(f"--map {column}: {err}{hint}") from None
 
     def names(self, role: str) -> tuple[str, ...]:
+        """Channel names of the mapped columns with ``role``, in command-line order."""
         return tuple(c.name for c in self.columns if c.role == role)
 
     def channels(self) -> Channels:
+        """The channel declaration (names and SI units per role) the mapped columns make."""
+
         def units(role: str) -> tuple[str, ...]:
             return tuple(self.unit(c).si for c in self.columns if c.role == role)
 

@@ -303,6 +303,7 @@ def parse_noise_std(value: Any) -> float | str:
 
 
 def schema_bytes(schema: Mapping[str, Any]) -> bytes:
+    """A JSON schema as compact UTF-8 JSON, the bytes an MCAP schema record holds."""
     return json.dumps(schema, indent=None, separators=(",", ":")).encode()
 
 

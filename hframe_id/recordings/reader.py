@@ -78,6 +78,7 @@ class LogContents:
     bytes_total: int = 0
 
     def channel(self, topic: str) -> Channel | None:
+        """The channel that carries ``topic``, or None if the file has none."""
         for channel in self.channels.values():
             if channel.topic == topic:
                 return channel

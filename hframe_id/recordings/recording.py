@@ -114,13 +114,16 @@ class Recording:
 
     @property
     def n_samples(self) -> int:
+        """Number of samples."""
         return int(self.time_s.shape[0])
 
     @property
     def duration_s(self) -> float:
+        """Time from the first to the last sample [s] (0 for an empty recording)."""
         return float(self.time_s[-1] - self.time_s[0]) if self.n_samples else 0.0
 
     def name(self) -> str:
+        """The file name of the recording, or ``<recording>`` if it was not read from a file."""
         return self.path.name if self.path else "<recording>"
 
     def declared_noise_std(self, output: str) -> float | str | None:

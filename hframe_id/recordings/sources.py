@@ -56,6 +56,7 @@ class SourceTable:
     first_line: int | None = None
 
     def sha256(self) -> str:
+        """SHA-256 of the file as hex digits (recorded as ``source.sha256``)."""
         return hashlib.sha256(self.path.read_bytes()).hexdigest()
 
     def at(self, i: int) -> str:

@@ -190,6 +190,7 @@ class LogWriter:
         self._queue.put((fmt.STATUS_TOPIC, time_us, message))
 
     def queue_depth(self) -> int:
+        """Messages queued and not yet written (reported in ``/rig/status``)."""
         return self._queue.qsize()
 
     # -- the writer thread ---------------------------------------------------------------------
