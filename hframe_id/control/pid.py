@@ -60,6 +60,7 @@ class PIDGains:
         return PIDGains(self.kp * factor, self.ki * factor, self.kd * factor)
 
     def describe(self) -> str:
+        """The gains as the thesis's table captions write them, e.g. ``PD K_P = 175, K_D = 4``."""
         kind = "PD" if self.ki == 0 else "PID"
         text = f"{kind} K_P = {self.kp:g}"
         if self.ki:
@@ -126,9 +127,11 @@ class ControllerOptions:
         ]  # fmt: skip
 
     def with_delay(self, delay_samples: int) -> ControllerOptions:
+        """A copy applying each voltage ``delay_samples`` sample periods after it is computed."""
         return replace(self, delay_samples=delay_samples)
 
     def describe(self) -> str:
+        """The gains as the thesis writes them, per motor if the two loops differ (section 5.7)."""
         if self.motor1 == self.motor2:
             return self.motor1.describe()
         return f"motor 1: {self.motor1.describe()}; motor 2: {self.motor2.describe()}"
@@ -153,6 +156,19 @@ class ResetWindupPID:
         self.previous_error = 0.0
 
     def step(self, actual: float, desired: float) -> float:
+        """One sample of the Appendix A routine (module docstring).
+
+        Parameters
+        ----------
+        actual : measured motor angle y_k [rad].
+        desired : reference motor angle r_k [rad].
+
+        Returns
+        -------
+        float
+            Controller output u_k [V], within [u_min_v, u_max_v]; updates ``integral`` and
+            ``previous_error``.
+        """
         g, t_samp = self.gains, self.sample_period_s
         u_max, u_min = self.u_max_v, self.u_min_v
         err = desired - actual

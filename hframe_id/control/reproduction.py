@@ -48,11 +48,13 @@ class ThesisTable:
 
     @property
     def label(self) -> str:
+        """Short name of the gain set, ``PID K_P/K_I/K_D`` or ``PD K_P/K_D``, e.g. ``PD 175/4``."""
         kind = "PID" if self.ki else "PD"
         gains = f"{self.kp:g}/{self.ki:g}/{self.kd:g}" if self.ki else f"{self.kp:g}/{self.kd:g}"
         return f"{kind} {gains}"
 
     def controller(self) -> ControllerOptions:
+        """The controller of this table: its gains on both motors, reset-windup PID (Appendix A)."""
         return ControllerOptions.from_gains(self.kp, self.ki, self.kd)
 
 
@@ -99,6 +101,7 @@ def score(over: list[float], offset: list[float]) -> float:
 
 
 def thesis_score(table: ThesisTable) -> float:
+    """The ranking score of a gain set from its printed Table 5.6 percentages (lower is better)."""
     return score(
         [p / 100 for p in table.percent_overshoot], [p / 100 for p in table.percent_offset]
     )
@@ -106,6 +109,18 @@ def thesis_score(table: ThesisTable) -> float:
 
 @dataclass
 class GainSetResult:
+    """One gain set simulated on the test square, with our metrics beside the printed table.
+
+    Attributes
+    ----------
+    thesis : the printed table of this gain set (Tables 5.1, 5.3-5.5).
+    result : the closed-loop simulation.
+    metrics : per-leg path deviations [m] of ``result``, as the thesis measures them.
+    stick_slip_metrics : the same metrics with the stick-slip friction law (Table 2.2).
+    over_ratio, offset_ratio : Table 5.6 ratios (|overshoot| legs 1-3, offset legs 1-4) to
+        PID K_P = 150, K_I = 100, K_D = 4.
+    """
+
     thesis: ThesisTable
     result: ClosedLoopResult
     metrics: list[LegMetrics]
@@ -115,6 +130,7 @@ class GainSetResult:
 
     @property
     def score(self) -> float:
+        """Mean of our seven Table 5.6 ratios (lower is better), see the module docstring."""
         return score(self.over_ratio, self.offset_ratio)
 
     def overshoot_deviation(self, leg: int) -> float:
@@ -127,6 +143,17 @@ class GainSetResult:
 
 @dataclass
 class Reproduction:
+    """The Chapter 5 controller comparison reproduced with one parameter set.
+
+    Attributes
+    ----------
+    params : the plant parameters simulated (the thesis's are Tables 4.1 and 4.2).
+    rows : one result per gain set, in the order of ``THESIS_TABLES``.
+    sensitivity : per variation of ``SENSITIVITY_CASES`` (by label), per gain set the leg-1
+        and leg-3 overshoots [m] (None: no overshoot); empty if not computed.
+    n_substeps : RK4 steps of the plant per sample period of the simulation.
+    """
+
     params: ParameterSet
     rows: list[GainSetResult]
     sensitivity: dict[str, list[tuple[float | None, float | None]]]
@@ -147,6 +174,7 @@ class Reproduction:
 
     @staticmethod
     def thesis_ranking() -> list[str]:
+        """Gain sets by the score of their printed Table 5.6 entries, best first."""
         return [t.label for t in sorted(THESIS_TABLES, key=thesis_score)]
 
 

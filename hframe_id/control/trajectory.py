@@ -84,6 +84,7 @@ class Leg:
 
     @property
     def distance_m(self) -> float:
+        """Length d of the leg [m]."""
         return float(math.dist(self.start_m, self.end_m))
 
     @property
@@ -117,6 +118,7 @@ class Leg:
 
     @property
     def t_end_s(self) -> float:
+        """Time the leg ends, t0 + T [s]."""
         return self.t_start_s + self.duration_s
 
     @property
@@ -168,6 +170,7 @@ class Trajectory:
 
     @property
     def start_m(self) -> tuple[float, float]:
+        """Start point (x, y) of the first leg [m]."""
         return self.legs[0].start_m
 
     def position(self, t_s: np.ndarray) -> np.ndarray:
