@@ -32,6 +32,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     make.add_argument("--weeks", type=int, required=True, metavar="W", help="weekly runs (>= 2)")
     make.add_argument("--seed", type=int, default=0, metavar="S", help="random seed")
     make.add_argument("--out", required=True, metavar="DIR", help="new (or empty) folder")
+    make.add_argument(
+        "--plant",
+        choices=("sim", "realistic"),
+        default="sim",
+        help="sim: plants of the fitted model (default); realistic: hframe-20 plants with "
+        "stick-slip friction, current limit and delays (docs/realistic-rig.md)",
+    )
     make.set_defaults(handler=run_make)
     report = actions.add_parser(
         "report",
@@ -69,7 +76,7 @@ def run_make(args: argparse.Namespace) -> int:
     def progress(rig: str, week: int) -> None:
         print(f"{rig} week {week}: recorded", file=sys.stderr, flush=True)
 
-    manifest = make_fleet(args.rigs, args.weeks, args.seed, args.out, progress)
+    manifest = make_fleet(args.rigs, args.weeks, args.seed, args.out, progress, args.plant)
     print(f"manifest: {manifest}")
     print(f"aging: {manifest.with_name('aging.yaml')}")
     return 0
