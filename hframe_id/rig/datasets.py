@@ -65,6 +65,7 @@ class TruthSpec:
 
     @property
     def file(self) -> str:
+        """Path of the truth parameter file inside the datasets folder."""
         return f"truth/{self.name}.yaml"
 
     def write(self, out: Path) -> tuple[ParameterSet, dict[str, str]]:
@@ -73,6 +74,17 @@ class TruthSpec:
         return load_parameter_file(path), {}
 
     def build(self, models_dir: Path = MODELS_DIR) -> ParameterSet:
+        """The truth: ``base`` from ``models_dir`` with ``scale`` and ``values`` applied.
+
+        Parameters
+        ----------
+        models_dir : folder of the shipped parameter files that ``base`` names.
+
+        Returns
+        -------
+        ParameterSet
+            The changed values (SI) with a header that says what was changed and from what.
+        """
         base = load_parameter_file(models_dir / self.base)
         changes = {k: base.values[k] * f for k, f in self.scale.items()}
         changes.update(self.values)
@@ -128,10 +140,12 @@ class PlantSpec:
 
     @property
     def file(self) -> str:
+        """Path of the plant file inside the datasets folder."""
         return f"plants/{self.name}.yaml"
 
     @property
     def reference_file(self) -> str:
+        """Path of the plant's reference parameters (the section-4.1 reduction for hframe-20)."""
         reduced = "hframe-8-reduced" if self.variant == "hframe-20" else self.variant
         return f"truth/{reduced}.yaml"
 
@@ -236,6 +250,7 @@ REALISTIC = Collection(
 
 
 def sha256(path: Path) -> str:
+    """SHA-256 of a file as hex digits (the manifest records one per dataset and truth file)."""
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 

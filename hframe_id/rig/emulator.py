@@ -56,6 +56,7 @@ class Emulator:
 
     # -- io ----------------------------------------------------------------------------------------
     def send(self, frame: bytes) -> None:
+        """Write one frame to the host; dropped (``overruns`` + 1) if the host is not reading."""
         if self.silent:
             return
         try:
@@ -68,6 +69,7 @@ class Emulator:
             raise
 
     def poll(self, timeout: float) -> list[tuple[int, bytes]]:
+        """Frames the host sent within ``timeout`` [s], as (frame type, payload); [] if none."""
         readable, _, _ = select.select([self.fd], [], [], max(timeout, 0.0))
         if not readable:
             return []
@@ -83,6 +85,7 @@ class Emulator:
         return self.decoder.feed(data)
 
     def info(self) -> dict:
+        """The INFO record: protocol version, identity, channels, sensors, travel [m]."""
         plant = self.plant.info
         s = plant.sensors
         return {
@@ -106,6 +109,7 @@ class Emulator:
 
     # -- the firmware --------------------------------------------------------------------------
     def serve(self) -> None:
+        """The firmware's main loop: answer HELLO with INFO, run a sampling session on START."""
         while True:
             for frame_type, payload in self.poll(0.1):
                 if frame_type == sp.HELLO:
@@ -180,6 +184,7 @@ class Emulator:
             k += 1
 
     def sample_frame(self, sample, watchdog: bool) -> bytes:
+        """One SAMPLE frame for ``sample``: counts, laser readings [nm], flags and DAC codes."""
         info = self.plant.info
         flags = sp.WATCHDOG if watchdog else 0
         for name, closed in sample.limits.items():
@@ -207,6 +212,7 @@ class Emulator:
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The emulator's command line (module docstring); ``--travel`` as (axis, min, max) [m]."""
     parser = argparse.ArgumentParser(
         prog="python -m hframe_id.rig.emulator",
         description="Emulated rig microcontroller on a pseudo-terminal (sim plant inside).",
@@ -236,6 +242,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Open a pseudo-terminal, print ``PORT <path>``, serve until interrupted; returns 0."""
     args = parse_args(argv)
     master, slave = os.openpty()
     tty.setraw(slave)

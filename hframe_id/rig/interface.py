@@ -55,18 +55,22 @@ class RigInfo:
 
     @property
     def encoders(self) -> tuple[str, ...]:
+        """Outputs read by the motor encoders (``phi1``, ``phi2``), in output order."""
         return tuple(n for n in self.outputs if n in ENCODER_OUTPUTS)
 
     @property
     def lasers(self) -> tuple[str, ...]:
+        """Outputs read by the laser sensors (``x``, ``y``), in output order."""
         return tuple(n for n in self.outputs if n in LASER_OUTPUTS)
 
     @property
     def limit_switches(self) -> tuple[str, ...]:
+        """Limit switches the rig has: those of the axes with a ``travel_m`` entry."""
         return tuple(s for s in LIMIT_SWITCHES if s[0] in self.travel_m)
 
     @property
     def period_us(self) -> int:
+        """The sample period in whole microseconds [us]."""
         return round(self.sample_period_s * 1e6)
 
     def metadata(self) -> dict[str, Any]:
@@ -163,6 +167,7 @@ class Rig(ABC):
         self.stop()
 
     def zero(self) -> np.ndarray:
+        """Zero voltages [V], one per input."""
         return np.zeros(len(self.info.inputs))
 
     def __enter__(self) -> Rig:

@@ -40,12 +40,22 @@ STATUS_INTERVAL_S = 0.1
 
 
 class ExperimentProtocol(Protocol):
+    """What ``run_experiment`` needs of a protocol (``hframe_id.rig.protocols``).
+
+    Attributes
+    ----------
+    name : protocol name, recorded as the ``protocol`` experiment field.
+    n_inputs : voltages per row, one per rig input.
+    """
+
     name: str
     n_inputs: int
 
-    def table(self, period_s: float) -> np.ndarray: ...
+    def table(self, period_s: float) -> np.ndarray:
+        """(N, n_u) voltages [V] at sample period ``period_s`` [s], row k applied after sample k."""
 
-    def metadata(self) -> dict[str, Any]: ...
+    def metadata(self) -> dict[str, Any]:
+        """The ``protocol.*`` fields of the recording's experiment record."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +114,8 @@ class RunSummary:
     events: list[tuple[str, str]] = field(default_factory=list)
 
     def lines(self) -> list[str]:
+        """The summary as aligned text lines, as ``hframe-id record`` prints it."""
+
         def us(value: float) -> str:
             return "n/a" if not math.isfinite(value) else f"{value:.0f} us"
 
@@ -130,6 +142,7 @@ class _Running:
         self.n, self.mean, self.m2, self.max = 0, 0.0, 0.0, -math.inf
 
     def add(self, value: float) -> None:
+        """Take one value into the running statistics."""
         self.n += 1
         delta = value - self.mean
         self.mean += delta / self.n
@@ -138,9 +151,11 @@ class _Running:
 
     @property
     def std(self) -> float:
+        """Sample standard deviation of the values so far (NaN for fewer than two)."""
         return math.sqrt(self.m2 / (self.n - 1)) if self.n > 1 else math.nan
 
     def values(self, scale: float = 1.0) -> tuple[float, float, float]:
+        """(mean, standard deviation, maximum) times ``scale``; NaNs if there are no values."""
         if self.n == 0:
             return math.nan, math.nan, math.nan
         return self.mean * scale, self.std * scale, self.max * scale
@@ -152,6 +167,7 @@ class _StopRequest:
         self._previous: dict[int, Any] = {}
 
     def install(self) -> None:
+        """Catch SIGINT and SIGTERM as a stop request (only possible on the main thread)."""
         if threading.current_thread() is not threading.main_thread():
             return
         for signum in (signal.SIGINT, signal.SIGTERM):
@@ -161,6 +177,7 @@ class _StopRequest:
         self.reason = f"{signal.Signals(signum).name} received"
 
     def restore(self) -> None:
+        """Put back the signal handlers ``install`` replaced."""
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
         self._previous.clear()

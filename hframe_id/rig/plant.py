@@ -141,10 +141,12 @@ class Plant:
             ) from None
 
     def where(self) -> str:
+        """Where the plant comes from, for messages: the file, else ``<variant plant>``."""
         return str(self.path) if self.path else f"<{self.parameters.variant} plant>"
 
     @property
     def variant(self) -> str:
+        """Model variant of the plant's parameters."""
         return self.parameters.variant
 
     @property

@@ -85,6 +85,7 @@ class StepProtocol:
 
     @property
     def n_inputs(self) -> int:
+        """Motors the step drives, one per entry of ``voltages_v``."""
         return len(self.voltages_v)
 
     def table(self, period_s: float) -> np.ndarray:
@@ -97,6 +98,7 @@ class StepProtocol:
         return table
 
     def metadata(self) -> dict[str, Any]:
+        """The ``protocol.*`` fields: voltage per motor [V], step, duration, pre-roll [s]."""
         meta: dict[str, Any] = {"protocol": self.name}
         for i, v in enumerate(self.voltages_v, start=1):
             meta[f"protocol.v{i}_V"] = v
@@ -141,6 +143,7 @@ class PulseProtocol:
         StepProtocol((self.amplitude_v,), self.width_s, self.duration_s, self.pre_roll_s)
 
     def table(self, period_s: float) -> np.ndarray:
+        """(N, n_inputs) voltages [V], row k commanded after sample k; other motors at 0 V."""
         single = StepProtocol(
             (self.amplitude_v,), self.width_s, self.duration_s, self.pre_roll_s
         ).table(period_s)
@@ -149,6 +152,7 @@ class PulseProtocol:
         return table
 
     def metadata(self) -> dict[str, Any]:
+        """The ``protocol.*`` fields: amplitude [V], width, duration, pre-roll [s], motor."""
         return {
             "protocol": self.name,
             "protocol.amplitude_V": self.amplitude_v,
@@ -187,9 +191,11 @@ class SequenceProtocol:
 
     @property
     def n_inputs(self) -> int:
+        """Motors the sequence drives (voltages per row)."""
         return len(self.voltages_v[0])
 
     def table(self, period_s: float) -> np.ndarray:
+        """(N, n_inputs) voltages [V], row k the row in force at k T (0 V before the first)."""
         duration = self.duration_s
         if duration is None:
             duration = self.time_s[-1] + period_s
@@ -203,6 +209,7 @@ class SequenceProtocol:
         return table
 
     def metadata(self) -> dict[str, Any]:
+        """The ``protocol.*`` fields: source file, its SHA-256, rows, duration [s]."""
         return {
             "protocol": self.name,
             "protocol.source": self.source,
@@ -270,6 +277,7 @@ class MultisineProtocol:
         return np.arange(max(first, 1), last + 1)
 
     def table(self, period_s: float) -> np.ndarray:
+        """(N, n_inputs) voltages [V], row k commanded after sample k (0 V during the pre-roll)."""
         n = _samples("duration", self.duration_s, period_s, minimum=1)
         start = _samples("pre-roll", self.pre_roll_s, period_s)
         harmonics = self._components()
@@ -284,6 +292,7 @@ class MultisineProtocol:
         return table
 
     def metadata(self) -> dict[str, Any]:
+        """The ``protocol.*`` fields: RMS [V], band [Hz], period, duration, pre-roll [s], seed."""
         return {
             "protocol": self.name,
             "protocol.rms_V": self.rms_v,

@@ -53,6 +53,10 @@ def crc16(data: bytes) -> int:
 
 
 def encode(frame_type: int, payload: bytes = b"") -> bytes:
+    """One frame: sync, type, payload length, ``payload``, CRC-16 of type to payload.
+
+    Raises ValueError if the payload exceeds ``MAX_PAYLOAD`` bytes.
+    """
     if len(payload) > MAX_PAYLOAD:
         raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
     head = HEAD.pack(SYNC, frame_type, len(payload))
@@ -70,6 +74,11 @@ class Decoder:
         self._buffer = bytearray()
 
     def feed(self, data: bytes) -> list[tuple[int, bytes]]:
+        """Append ``data`` and return the complete frames in it as (frame type, payload).
+
+        Bytes before a sync word and frames with a bad CRC or length are skipped (counted in
+        ``bytes_discarded`` and ``crc_errors``); an incomplete frame waits for the next call.
+        """
         buffer = self._buffer
         buffer += data
         frames = []
@@ -106,8 +115,10 @@ class Decoder:
 
 
 def encode_info(info: dict[str, Any]) -> bytes:
+    """An INFO frame carrying ``info`` as compact JSON."""
     return encode(INFO, json.dumps(info, separators=(",", ":")).encode())
 
 
 def decode_info(payload: bytes) -> dict[str, Any]:
+    """The JSON record of an INFO frame's payload."""
     return json.loads(payload.decode())

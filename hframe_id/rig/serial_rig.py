@@ -144,12 +144,14 @@ class SerialRig(Rig):
 
     # -- the rig interface -------------------------------------------------------------------------
     def start(self) -> None:
+        """Send START with the period [us] and watchdog [ms]; 0 V until the first command."""
         self._samples.clear()
         self._zero_codes = self.info.sensors.dac_code(np.zeros(2))
         self._send(sp.START, sp.START_PAYLOAD.pack(self.info.period_us, self.watchdog_ms))
         self._running = True
 
     def read(self) -> RigSample:
+        """The next sample; ``RigFault`` on a device fault or when the link falls silent."""
         if not self._running:
             raise RigFault(f"{self.port}: read() before start()")
         deadline = time.perf_counter() + self.link_timeout_s
@@ -194,6 +196,7 @@ class SerialRig(Rig):
         )
 
     def set_voltages(self, sequence: int, volts: Sequence[float]) -> None:
+        """Send ``volts`` [V] (one per input) as DAC codes, to hold from sample ``sequence`` on."""
         volts = np.asarray(volts, dtype=float)
         if volts.shape != (len(self.info.inputs),):
             raise OptionError(
@@ -204,6 +207,7 @@ class SerialRig(Rig):
         self._send(sp.COMMAND, sp.COMMAND_PAYLOAD.pack(sequence, int(codes[0]), int(codes[1])))
 
     def stop(self) -> None:
+        """Command 0 V and STOP, and wait briefly for STOPPED; safe after a link fault."""
         if not self._running:
             return
         self._running = False
@@ -218,5 +222,6 @@ class SerialRig(Rig):
             pass  # the link is gone; the device watchdog has dropped the outputs
 
     def close(self) -> None:
+        """Stop the device and close the serial port."""
         self.stop()
         self._serial.close()

@@ -117,6 +117,7 @@ class SimRig(Rig):
         self._started = False
 
     def start(self) -> None:
+        """Start sampling from rest: state zero, outputs at 0 V, the noise generator reseeded."""
         self._rng = np.random.default_rng(self.seed)
         self._readout = SensorReadout(self.sensors, self.info.outputs, self._rng)
         self._x = np.zeros(self.model.n_states)
@@ -131,6 +132,7 @@ class SimRig(Rig):
         self._started = True
 
     def read(self) -> RigSample:
+        """The next sample: the plant advanced one period (paced to real time if ``paced``)."""
         if not self._started:
             raise RigFault("sim rig: read() before start()")
         k = self._k
@@ -164,6 +166,7 @@ class SimRig(Rig):
         )
 
     def set_voltages(self, sequence: int, volts: Sequence[float]) -> None:
+        """Command ``volts`` [V] (one per input, through the DAC) from sample ``sequence`` on."""
         volts = np.asarray(volts, dtype=float)
         if volts.shape != (self.model.n_inputs,):
             raise OptionError(
@@ -173,11 +176,13 @@ class SimRig(Rig):
         self._command_sequence = int(sequence)
 
     def stop(self) -> None:
+        """Set the outputs to 0 V and stop sampling."""
         if self._started:
             self._applied = np.zeros(self.model.n_inputs)
         self._started = False
 
     def attachments(self) -> list[Attachment]:
+        """The plant parameter file (and, for a realistic plant, its plant file and reference)."""
         text = yaml.safe_dump(
             to_document(self.params), sort_keys=False, allow_unicode=True, width=100
         )
