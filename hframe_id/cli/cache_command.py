@@ -10,6 +10,7 @@ import argparse
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``cache`` subcommand (``info``, ``clear``)."""
     parser = subparsers.add_parser(
         "cache",
         help="show or clear the cache of compiled native code",
@@ -29,6 +30,7 @@ def _size(size: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id cache info|clear``."""
     from hframe_id import native
 
     if args.action == "clear":

@@ -11,6 +11,7 @@ from hframe_id.errors import LogFormatError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``datasets`` subcommand (``make``, ``list``, ``verify``)."""
     parser = subparsers.add_parser(
         "datasets",
         help="make, list or verify the shipped datasets",
@@ -55,6 +56,7 @@ def _collection(args: argparse.Namespace):
 
 
 def run_make(args: argparse.Namespace) -> int:
+    """Run ``hframe-id datasets make``: write truth files, recordings and manifest."""
     from hframe_id.rig.datasets import make_datasets
 
     def report(spec, summary) -> None:
@@ -67,6 +69,7 @@ def run_make(args: argparse.Namespace) -> int:
 
 
 def run_list(args: argparse.Namespace) -> int:
+    """Run ``hframe-id datasets list``: each recording with its truth file, seed and description."""
     collection = _collection(args)
     rows = [
         {
@@ -86,6 +89,10 @@ def run_list(args: argparse.Namespace) -> int:
 
 
 def run_verify(args: argparse.Namespace) -> int:
+    """Run ``hframe-id datasets verify`` against the manifest's SHA-256 sums.
+
+    Exit status 0 if every file matches; on a mismatch 2 with ``--json``, else LogFormatError.
+    """
     from hframe_id.rig.datasets import verify_datasets
 
     problems = verify_datasets(args.dir)

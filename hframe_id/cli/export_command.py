@@ -10,6 +10,7 @@ from hframe_id.errors import OptionError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``export`` subcommand."""
     from hframe_id.analysis.formats import FORMATS
 
     formats = "; ".join(f"{f.name}: {f.description}" for f in FORMATS.values())
@@ -32,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id export``: the file in ``--format`` to ``--out`` or standard output."""
     from hframe_id.analysis.export import export_format, render, write_atomic
     from hframe_id.parameters import load_parameter_file
 

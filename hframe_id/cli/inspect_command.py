@@ -24,6 +24,7 @@ LINK_FIELDS = (
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``inspect`` subcommand."""
     parser = subparsers.add_parser(
         "inspect",
         help="show what a recording holds and how good its data is",
@@ -47,6 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id inspect``: the recording's summary as text or JSON, plotted if asked."""
     from hframe_id.recordings.reader import read_log, read_recording
 
     with warnings.catch_warnings(record=True) as caught:

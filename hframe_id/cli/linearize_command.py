@@ -7,6 +7,7 @@ import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``linearize`` subcommand."""
     parser = subparsers.add_parser(
         "linearize",
         help="poles and zeros of the model linearized about rest",
@@ -35,6 +36,10 @@ def _table(values: list[list[float]], omegas: list[float], zetas: list[float]) -
 
 
 def format_text(report: dict) -> str:
+    """The text form of a ``pole_zero_report``: poles, then the zeros of each input -> output pair.
+
+    Each with its natural frequency [rad/s] and damping ratio [-].
+    """
     lines = [f"{report['model']}: {report['title']} ({report['source']})"]
     lines.append("linearized about rest (x = 0, u = 0)")
     lines += [f"note: {note}" for note in report["notes"]]
@@ -54,6 +59,7 @@ def format_text(report: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id linearize``: the pole-zero report as text or JSON."""
     from hframe_id.analysis.export import pole_zero_report
     from hframe_id.parameters import load_parameter_file
 

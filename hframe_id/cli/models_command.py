@@ -7,6 +7,7 @@ import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``models`` subcommand."""
     parser = subparsers.add_parser(
         "models",
         help="list model variants and their signals and parameters",
@@ -18,6 +19,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def describe(variant: str) -> dict:
+    """A variant as ``hframe-id models`` shows it: signals and parameters with their units."""
     from hframe_id.models import build_model, declaration, parameter_specs
 
     model = build_model(variant)
@@ -37,6 +39,7 @@ def describe(variant: str) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id models``: every variant as text or JSON."""
     from hframe_id.models import variants
 
     described = [describe(v) for v in variants()]
