@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # CasADi and pandas are imported when the loop runs, not for 
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``control`` subcommand."""
     parser = subparsers.add_parser(
         "control",
         help="closed-loop PID simulation on the test square or point-to-point moves",
@@ -113,6 +114,11 @@ def _nonnegative(name: str, value: float | None) -> None:
 
 
 def build_trajectory(args: argparse.Namespace):
+    """The reference path asked for: the test square (section 5.2) or point-to-point moves.
+
+    Lengths in [m], speeds in [m/s], times in [s]; ``--settle`` defaults to 0 for the square (as
+    in the thesis) and to 0.2 s for points. Raises OptionError for options that do not fit.
+    """
     _nonnegative("--settle", args.settle)
     _nonnegative("--dwell", args.dwell)
     if args.trajectory == "square":
@@ -163,6 +169,10 @@ def _signals(result) -> pd.DataFrame:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id control``: simulate the PID loops on the path and print the per-leg metrics.
+
+    Checks every option before simulating; writes ``--csv`` and ``--plot`` only after the run.
+    """
     import numpy as np
 
     from hframe_id.control.closed_loop import check_hframe, simulate_closed_loop

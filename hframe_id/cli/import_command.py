@@ -26,6 +26,7 @@ docs/import.md.
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``import`` subcommand."""
     parser = subparsers.add_parser(
         "import",
         help="convert a CSV or MATLAB .mat log into the log format (any rig)",
@@ -109,6 +110,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id import``: convert the file with the ``--map`` columns into ``--out``."""
     from hframe_id.recordings.importer import import_recording
 
     try:

@@ -14,6 +14,7 @@ if TYPE_CHECKING:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``params`` subcommand (``show``, ``check``)."""
     parser = subparsers.add_parser(
         "params",
         help="show or check parameter files",
@@ -79,6 +80,7 @@ def format_table(params: ParameterSet) -> str:
 
 
 def run_show(args: argparse.Namespace) -> int:
+    """Run ``hframe-id params show``: the file as a table of name, unit, value, description."""
     from hframe_id.parameters import load_parameter_file
 
     params = load_parameter_file(args.file)
@@ -92,6 +94,7 @@ def run_show(args: argparse.Namespace) -> int:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    """Run ``hframe-id params check``: exit status 0 if every file is valid, else 2."""
     from hframe_id.parameters import load_parameter_file
 
     files = []

@@ -8,6 +8,7 @@ from hframe_id.cli.outputs import check_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``reduce`` subcommand (hframe-20 to hframe-8, section 4.1)."""
     parser = subparsers.add_parser(
         "reduce",
         help="reduce an hframe-20 parameter file to an hframe-8 one (section 4.1)",
@@ -22,6 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id reduce``: write the reduced hframe-8 parameter file to ``--out``."""
     from hframe_id.parameters import load_parameter_file, save_parameter_file
     from hframe_id.parameters.reduce import reduce_to_hframe8
 

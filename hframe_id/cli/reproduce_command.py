@@ -17,6 +17,7 @@ DEFAULT_PARAMS = Path("models/hframe-8-table4.2.yaml")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``reproduce`` subcommand (the Chapter 5 controller tables)."""
     parser = subparsers.add_parser(
         "reproduce",
         help="reproduce the Chapter 5 controller tables (markdown report with plots)",
@@ -37,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id reproduce``: write the report and print each gain set against the thesis."""
     from hframe_id.control.closed_loop import check_hframe
     from hframe_id.control.reproduction import reproduce, write_report
     from hframe_id.models import build_model

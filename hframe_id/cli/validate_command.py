@@ -18,6 +18,7 @@ HELP_DEFAULTS = {"horizon": 10, "window": 10, "max_lag": 25}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``validate`` subcommand."""
     parser = subparsers.add_parser(
         "validate",
         help="simulation / k-step fit [%%] and residual tests of parameter files on recordings",
@@ -83,6 +84,7 @@ def _read(names: list[str]) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id validate``: fit [%] and residual tests as text or JSON, plots if asked."""
     from hframe_id.parameters import load_parameter_file
     from hframe_id.validation import ValidationOptions, validate
     from hframe_id.validation.output import to_document, to_text
