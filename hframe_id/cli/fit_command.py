@@ -71,6 +71,7 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``fit`` subcommand."""
     parser = subparsers.add_parser(
         "fit",
         help="fit stiffness, friction and inertia to recordings (multiple shooting)",
@@ -271,6 +272,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def resolve_dataset(name: str) -> Path:
+    """The recording ``name``: as given, else in ./datasets/, then in the shipped datasets/.
+
+    Raises FitError naming the folders looked in.
+    """
     path = Path(name)
     if path.exists():
         return path
@@ -437,6 +442,10 @@ def _write_outputs(
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id fit``: fit, cross-validate, write the parameter file and the report.
+
+    Exit status 0 on success, 1 if the fit failed (then no parameter file is written).
+    """
     from hframe_id.fitting import fit_recordings
     from hframe_id.fitting.report import incomplete_recordings
     from hframe_id.fitting.summary_json import fit_summary

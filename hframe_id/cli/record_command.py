@@ -13,6 +13,7 @@ from hframe_id.errors import OptionError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``record`` subcommand."""
     parser = subparsers.add_parser(
         "record",
         help="run an experiment on a rig and record it (MCAP)",
@@ -151,6 +152,10 @@ def _protocol(args: argparse.Namespace, n_inputs: int):
 
 
 def make_rig(args: argparse.Namespace):
+    """The rig ``--rig`` names: sim (``--params`` or ``--plant``) or serial (``--port``).
+
+    Raises OptionError for options of the other backend.
+    """
     if args.rig == "sim":
         from hframe_id.rig.sim import SimRig
 
@@ -227,6 +232,10 @@ def _clamp_sentence(clamp: dict, low: float, high: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id record``: the protocol on the rig, recorded to ``--out``.
+
+    Exit status 0 if the run completed, 1 if it was aborted (the recording is kept).
+    """
     check_file(args.out, "--out", make_parents=True)
     from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
     from hframe_id.recordings.writer import Attachment

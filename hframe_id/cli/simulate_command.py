@@ -26,6 +26,7 @@ if TYPE_CHECKING:  # imported when a simulation runs, not for --help
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Register the ``simulate`` subcommand."""
     parser = subparsers.add_parser(
         "simulate",
         help="open-loop simulation (steps, pulses, CSV or recorded voltages) to CSV / MCAP",
@@ -243,6 +244,7 @@ def _simulate(args, plant, model, table: np.ndarray, dt: float) -> tuple[Simulat
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id simulate``: open loop to CSV, optionally an MCAP recording and a plot."""
     import numpy as np
 
     plant, model = _load_plant(args)
