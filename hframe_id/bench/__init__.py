@@ -24,4 +24,5 @@ def median_time(function: Callable[[], object], repeats: int = 5, warmup: int = 
 
 
 def heading(title: str) -> None:
+    """Print a section heading (markdown level 2)."""
     print(f"\n## {title}\n", flush=True)

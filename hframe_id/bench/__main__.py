@@ -45,6 +45,7 @@ def _seconds(text: str) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Parse the options, print the machine, run the sections named (all by default)."""
     parser = argparse.ArgumentParser(prog="python -m hframe_id.bench")
     parser.add_argument("sections", nargs="*", metavar="SECTION", help=f"one of {SECTIONS}")
     realistic = parser.add_mutually_exclusive_group()

@@ -330,6 +330,7 @@ class _Data:
 
     @property
     def n_experiments(self) -> int:
+        """Number of experiments E."""
         return self.x0.shape[1]
 
 
@@ -464,6 +465,7 @@ class _SingleShooting:
         self.initial_cost = math.nan
 
     def parameters(self, theta: np.ndarray) -> np.ndarray:
+        """The full parameter vector (SI) at log-parameters ``theta``: p = p_0 exp(theta)."""
         p = self.p0.copy()
         p[list(self.free)] = self.p0[list(self.free)] * np.exp(theta)
         return p
@@ -503,6 +505,8 @@ class _SingleShooting:
         return ((outputs - d.measured) * d.weights)[d.mask]
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
+        """Noise-weighted output errors (y_sim - y_meas) / sigma over the valid samples;
+        records the best cost seen."""
         self._check_time()
         self.nfev += 1
         d = self.data
@@ -522,6 +526,7 @@ class _SingleShooting:
         return r
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """d residuals / d theta, by the options' method (sensitivities or differences)."""
         self._check_time()
         self.njev += 1
         if self.options.jacobian == "sensitivities":

@@ -62,6 +62,7 @@ def _fit(extra: list[str]) -> tuple[float, float]:
 
 
 def run() -> None:
+    """Print the start-up times of three commands (lazy vs eager imports) and of two fits."""
     heading("command line")
     params = str(model_file("hframe-8-table4.2.yaml"))
     print(f"median of {REPEATS} new processes; baseline: the same with every command's imports")

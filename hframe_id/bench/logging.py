@@ -78,6 +78,8 @@ def _real_time(rig, folder: Path, name: str) -> None:
 
 
 def run() -> None:
+    """Print MCAP write/read throughput, the logger's overhead per sample and whether the
+    logger keeps up with 1 kHz in real time."""
     heading("logging: MCAP write/read throughput")
     messages = [_message(k) for k in range(N_MESSAGES)]
     with tempfile.TemporaryDirectory() as tmp:

@@ -79,6 +79,8 @@ def _rate(label: str, seconds: float, simulated_s: float, base: dict[str, float]
 
 
 def closed_loop_lines(repeats: int = 21) -> list[str]:
+    """Benchmark lines of the closed loop (square trajectory, PID gains 150/100/4): median
+    of ``repeats`` runs against the baselines timed in the same call."""
     params = load_parameter_file(PLANT)
     model = build_model(params.variant)
     p = model.parameter_vector(params.values)
@@ -143,6 +145,9 @@ def _verdict(seconds: float, target: float) -> str:
 
 
 def open_loop_lines(repeats: int = 21) -> list[str]:
+    """Benchmark lines of the open loop (the -4 V / -4 V step of section 4.4): the compiled
+    horizon and ``simulate`` (median of ``repeats``) against a Python loop of RK4 steps and
+    SciPy's LSODA, timed in the same call."""
     params = load_parameter_file(PLANT)
     model = build_model(params.variant)
     p = model.parameter_vector(params.values)

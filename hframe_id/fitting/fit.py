@@ -123,6 +123,7 @@ class ParameterEstimate:
 
     @property
     def key(self) -> str:
+        """``"name [unit]"``, as in parameter files and reports."""
         return f"{self.name} [{self.unit}]"
 
 
@@ -152,6 +153,7 @@ class FitResult:
 
     @property
     def variant(self) -> str:
+        """The model variant fitted."""
         return self.parameters.variant
 
     @property

@@ -83,6 +83,11 @@ class SolverState:
 
 @dataclass
 class StageReport:
+    """How one stage ended: its name, smoothing velocities (v_s [m/s], [rad/s]), iterations,
+    convergence and message, cost (chi^2 / 2), largest continuity defect (noise std), wall
+    time [s], free parameters at a bound (indices), substeps (fewest, most) per sample and
+    the final trust-region radius."""
+
     name: str
     smoothing: tuple[float, float]
     iterations: int
@@ -191,6 +196,7 @@ class GaussNewton:
 
     @property
     def prox(self) -> np.ndarray:
+        """The proximal weights in use: ``set_smoothing``'s unit times the adapted scale."""
         return self.prox_unit * self.prox_scale
 
     def _evaluate(self, state: SolverState, nodes, theta, smoothing) -> Evaluation:

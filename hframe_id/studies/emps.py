@@ -62,6 +62,7 @@ def fit_row(recording, published, continuity: str, horizon: int) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--horizons", type=int, nargs="+", default=[10, 20, 50, 100, 200, 500])
     args = parser.parse_args(argv)

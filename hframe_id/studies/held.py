@@ -45,6 +45,7 @@ def run_trial(seed: int, consider: dict | None = None) -> tuple[bool, dict[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     args = parser.parse_args(argv)

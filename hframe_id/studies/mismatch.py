@@ -57,6 +57,7 @@ class MismatchTrial:
 
 
 def plant_for(seed: int) -> Plant:
+    """The shipped realistic hframe-20 plant for ``seed`` < 0, else a fresh one."""
     return shipped_plant("hframe-20") if seed < 0 else realistic_plant("hframe-20", seed)
 
 
@@ -133,6 +134,7 @@ def _line(t: MismatchTrial) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="*", default=[-1], help="plants (-1 shipped)")
     parser.add_argument(
