@@ -14,6 +14,7 @@ outside its stability interval for the friction mode) the error exceeds both bou
 can fail.
 """
 
+import copy
 from pathlib import Path
 
 import casadi as ca
@@ -21,10 +22,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from hframe_id.fitting import FitOptions, kernel
+from hframe_id.fitting.problem import build_problem, output_matrix
+from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.simulation.friction import friction_sites
-from hframe_id.simulation.integrators import stable_substeps
+from hframe_id.simulation.integrators import rk4_step, stable_substeps
 from hframe_id.simulation.open_loop import simulate
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
@@ -175,3 +180,112 @@ def test_compiled_equals_virtual_machine(case):
     vm = simulate(model, p, inputs, DT)
     native = simulate(model, p, inputs, DT, compiled=True)
     np.testing.assert_allclose(native, vm, rtol=1e-9, atol=1e-12)
+
+
+# ---------------------------------------------------------------- simulator == fitter, bitwise
+# One RK4 (``integrators.rk4_substep``) under the simulator, the sim rig and the fitter: on the
+# same parameters, inputs, initial state, substep count and step, the fitter's shooting windows
+# must reproduce the simulator's states and residuals exactly, not to a tolerance. Exact is
+# possible because every path runs the same IEEE operations in the same order: the simulator
+# and the sim rig evaluate the SX graph in CasADi's virtual machine; the fitter's kernels are
+# that graph with h a symbol (h / 2 and h / 6 rounded at run time instead of by Python: the
+# same doubles), compiled without value-changing flags (``kernel.COMPILE_FLAGS``, no FMA
+# contraction) or run in the same virtual machine. Not covered: ``simulate(compiled=True)``,
+# built with -O3 -freciprocal-math, -march=native (FMA contraction) and its own tanh
+# (``simulation.compiled``) for speed; it agrees with the virtual machine to ~4e-14 here
+# (``test_compiled_equals_virtual_machine``) and the fitter never uses it.
+
+
+@pytest.fixture(scope="module")
+def shooting():
+    truth = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    # A start, a reversal through zero velocity (stiff knee) and coasting to rest.
+    voltages = np.zeros((400, 2))
+    voltages[50:200] = (-4.0, 2.0)
+    voltages[200:300] = (6.0, -3.0)
+    problem = build_problem([simulate_recording(truth, voltages, seed=4)], truth, FitOptions())
+    ms = MultipleShooting(problem).uniform()
+    theta = np.zeros(len(problem.free))
+    p = problem.parameters(theta)
+    smoothing = problem.smoothing
+    n_sub = ms.substep_plan(p, smoothing)["stiff"]
+    inputs = problem.experiments[0].inputs
+    states = simulate(ms.model, p, inputs, ms.dt, n_substeps=n_sub, smoothing=smoothing)
+    return ms, theta, p, smoothing, n_sub, states
+
+
+def _window_states(ms, states):
+    """(W, M + 1, n_x) the simulator's states laid out as the fitter's windows, and the
+    (W, M + 1) mask of the samples that exist (the last window may be short)."""
+    index = ms.window_start[:, None] + np.arange(ms.m + 1)
+    exists = np.arange(ms.m + 1) <= ms.window_length[:, None]
+    return states[np.minimum(index, len(states) - 1)], exists
+
+
+def test_stiff_substeps_are_the_simulators(shooting):
+    # The fitter's stiff count is ``stable_substeps`` with the fit's safety, its fast count as
+    # the minimum and its max_substeps as the cap (at the start and at other parameters).
+    ms, theta, p, smoothing, n_sub, states = shooting
+    options = ms.transcription
+    rng = np.random.default_rng(1)
+    for step in [theta, *(rng.normal(size=theta.size) for _ in range(5))]:
+        p = ms.problem.parameters(step)
+        for s in (smoothing, (1e-2, 1e-1)):
+            plan = ms.substep_plan(p, s)
+            expected = stable_substeps(
+                ms.model, p, ms.dt, s, options.substep_safety, plan["fast"], options.max_substeps
+            )
+            assert plan["stiff"] == expected
+    assert n_sub > 4
+
+
+def test_sim_rig_step_is_the_simulator(shooting):
+    # SimRig steps the plant with ``rk4_step`` one sample at a time.
+    ms, theta, p, smoothing, n_sub, states = shooting
+    step = rk4_step(ms.model, n_sub, ms.dt)
+    x = states[0]
+    rig = [x]
+    for u in ms.problem.experiments[0].inputs:
+        x = np.asarray(step(x, u, p, ca.DM(smoothing))).ravel()
+        rig.append(x)
+    np.testing.assert_array_equal(np.array(rig), states)
+
+
+@pytest.mark.parametrize("loop", ["native", "casadi-map"])
+@pytest.mark.parametrize("derivatives", [True, False])
+def test_fitter_windows_are_bitwise_the_simulator(shooting, loop, derivatives):
+    """The fitter's states and weighted residuals from nodes on the simulated trajectory equal
+    the simulator's exactly, through the compiled window loop ("native", where a C compiler
+    exists) and through CasADi's mapped window function ("casadi-map")."""
+    ms, theta, p, smoothing, n_sub, states = shooting
+    if loop == "native":
+        if ms.native[derivatives] is None:
+            pytest.skip("no C compiler: the fitter has no native window loop here")
+    else:
+        ms = copy.copy(ms)
+        ms.native, ms._buffers = {True: None, False: None}, {}
+    expected, exists = _window_states(ms, states)
+    ev = ms.evaluate(expected[:, 0], theta, smoothing, derivatives=derivatives)
+    assert ev.n_substeps == (n_sub, n_sub)
+    np.testing.assert_array_equal(ev.states[exists], expected[exists])
+    y = expected[:, : ms.m] @ output_matrix(ms.model).T
+    residual = ms.weight * (y - ms.measured)
+    np.testing.assert_array_equal(ev.residual[exists[:, : ms.m]], residual[exists[:, : ms.m]])
+
+
+@pytest.mark.parametrize("derivatives", [True, False])
+def test_kernel_in_the_virtual_machine_is_bitwise_the_simulator(shooting, derivatives):
+    """The fitter's substep kernels evaluated by CasADi's SX virtual machine (no compiled code
+    at all, as without a C compiler) over all windows equal the simulator's states exactly."""
+    ms, theta, p, smoothing, n_sub, states = shooting
+    free = tuple(ms.problem.free)
+    if derivatives:
+        substep = kernel.substep_function(ms.model, free)
+    else:
+        substep = kernel.state_substep_function(ms.model)
+    windows = kernel.window_function(substep, n_sub, ms.m, ms.n_windows, 1)
+    expected, exists = _window_states(ms, states)
+    u = ms.inputs.reshape(-1, ms.nu).T
+    out = windows(expected[:, 0].T, u, p, ca.DM(smoothing), ms.dt / n_sub)
+    xs = np.asarray(out[0] if derivatives else out).T.reshape(ms.n_windows, ms.m, ms.nx)
+    np.testing.assert_array_equal(xs[exists[:, 1:]], expected[:, 1:][exists[:, 1:]])

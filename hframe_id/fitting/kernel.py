@@ -7,10 +7,12 @@ so the Gauss-Newton Jacobian is the Jacobian of the residuals actually computed)
 
     x+ = Phi(x, u, p, s, h),    S+ = dPhi/dx S + [0, dPhi/dp_free]
 
-with S = d x / d(x_0, p_free). The substep is an SX graph (~10^4 flat instructions), generated
-as C and compiled once per (model, free set) by ``hframe_id.native`` (cached on disk, so later
-fits load it in milliseconds). Where no C compiler is available, CasADi's SX virtual machine
-runs the same graph about 2x slower.
+with S = d x / d(x_0, p_free). Phi is ``hframe_id.simulation.integrators.rk4_substep``, the
+simulators' RK4 step, with the substep length h a symbol (so the fitter's states are bitwise
+the simulator's: tests/test_simulation_integrator.py). The substep is an SX graph (~10^4 flat
+instructions), generated as C and compiled once per (model, free set) by ``hframe_id.native``
+(cached on disk, so later fits load it in milliseconds). Where no C compiler is available,
+CasADi's SX virtual machine runs the same graph about 2x slower.
 
 Samples, windows and experiments are then layered on top: a C loop compiled with the substep
 (``DRIVER``: windows split over threads, samples and substeps in sequence), or, without a C
@@ -28,6 +30,7 @@ import casadi as ca
 
 from hframe_id import native
 from hframe_id.models import Model
+from hframe_id.simulation.integrators import rk4_substep
 
 #: Compiler flags of the kernels: no value-changing optimization, so the results are bitwise
 #: those of CasADi's virtual machine (tests/test_native.py).
@@ -120,7 +123,8 @@ CASADI_SYMBOL_EXPORT int hf_windows(const casadi_real* x0, const casadi_real* u,
 
 def _rk4_symbols(model: Model) -> tuple[ca.SX, ...]:
     """Symbols (x, u, p, s, h) of one substep: state, held input, parameters, smoothing
-    velocities [m/s, rad/s] and substep length [s]."""
+    velocities [m/s, rad/s] and substep length [s] (an input, so one compiled kernel serves
+    every substep count)."""
     return (
         ca.SX.sym("x", model.n_states),
         ca.SX.sym("u", model.n_inputs),
@@ -128,20 +132,6 @@ def _rk4_symbols(model: Model) -> tuple[ca.SX, ...]:
         ca.SX.sym("s", 2),
         ca.SX.sym("h"),
     )
-
-
-def _rk4_step(model: Model, x: ca.SX, u: ca.SX, p: ca.SX, s: ca.SX, h: ca.SX) -> ca.SX:
-    """The state after one classical RK4 substep of length h (one expression graph for both
-    kernels, so their states agree bit for bit)."""
-
-    def f(state: ca.SX) -> ca.SX:
-        return model.dynamics(state, u, p, s)
-
-    k1 = f(x)
-    k2 = f(x + h / 2 * k1)
-    k3 = f(x + h / 2 * k2)
-    k4 = f(x + h * k3)
-    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def substep_function(model: Model, free: tuple[int, ...]) -> ca.Function:
@@ -153,7 +143,7 @@ def substep_function(model: Model, free: tuple[int, ...]) -> ca.Function:
     nx = model.n_states
     x, u, p, s, h = _rk4_symbols(model)
     sens = ca.SX.sym("S", nx, nx + len(free))
-    x_next = _rk4_step(model, x, u, p, s, h)
+    x_next = rk4_substep(model.dynamics, x, u, p, s, h)
     phi_x = ca.jacobian(x_next, x)
     phi_p = ca.jacobian(x_next, p)[:, list(free)] if free else ca.SX(nx, 0)
     sens_next = phi_x @ sens + ca.horzcat(ca.SX(nx, nx), phi_p)
@@ -173,7 +163,7 @@ def state_substep_function(model: Model) -> ca.Function:
     return ca.Function(
         "rk4_substep",
         [x, u, p, s, h],
-        [_rk4_step(model, x, u, p, s, h)],
+        [rk4_substep(model.dynamics, x, u, p, s, h)],
         ["x", "u", "p", "s", "h"],
         ["x_next"],
     )

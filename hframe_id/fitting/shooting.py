@@ -35,10 +35,12 @@ from hframe_id.fitting.kernel import (
 )
 from hframe_id.fitting.options import TranscriptionOptions
 from hframe_id.fitting.problem import FitProblem, output_matrix, rigid_modes
-from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT
+from hframe_id.simulation.integrators import (
+    MIN_SUBSTEPS,
+    RK4_STABILITY_LIMIT,
+    substeps_for_radius,
+)
 
-#: Fewest substeps per sample (keeps the belt modes, |lambda| ~ 330 1/s, accurate to ~1e-8).
-MIN_SUBSTEPS = 4
 #: Window groups are padded to a multiple of this, so mapped functions are reused.
 PAD = 16
 
@@ -284,9 +286,14 @@ class MultipleShooting:
         limit = RK4_STABILITY_LIMIT / options.substep_safety
         radius_moving = float(np.max(np.abs(np.linalg.eigvals(a_moving))))
         radius_rest = float(np.max(np.abs(np.linalg.eigvals(a_rest))))
-        fast = max(MIN_SUBSTEPS, math.ceil(radius_moving * self.dt / limit))
-        fast = min(fast, options.max_substeps)
-        stiff = min(max(fast, math.ceil(radius_rest * self.dt / limit)), options.max_substeps)
+        safety, cap = options.substep_safety, options.max_substeps
+        # One rule (``substeps_for_radius``) for both counts. stiff: the simulators' count
+        # (``stable_substeps``: the same Jacobian at rest, bitwise), never fewer than fast and
+        # capped by the fit's max_substeps instead of 400; computed from a_rest, which the
+        # thresholds need anyway. fast: the rule at the moving Jacobian, a different quantity
+        # (the Coulomb slope there has decayed by sech^2(100) to nothing).
+        fast = substeps_for_radius(radius_moving, self.dt, safety, MIN_SUBSTEPS, cap)
+        stiff = substeps_for_radius(radius_rest, self.dt, safety, fast, cap)
         # Coulomb part of each velocity's own rate: lambda_j sech^2(v / v_s).
         lam = np.abs(np.diag(a_rest)[self.nq :] - np.diag(a_moving)[self.nq :])
         h_fast = self.dt / fast

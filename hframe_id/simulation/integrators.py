@@ -1,5 +1,11 @@
 """Fixed-step RK4 with substeps over one zero-order-hold sample, shared by simulator and fitter.
 
+The one place of the RK4 stages (``rk4_substep``): the simulators, the sim rig and the closed
+loop build their per-sample step from it with a numeric substep length, the fitter's kernels
+(``hframe_id.fitting.kernel``) with a symbolic one. The stages are the same operations in the
+same order either way, so simulator and fitter states agree bit for bit on the same inputs
+(tests/test_simulation_integrator.py).
+
 Why fixed-step RK4: the input is zero-order held at the sample time (1 ms, section 5.3), so
 each sample is one smooth initial-value problem; a fixed number of RK4 substeps gives a
 CasADi expression graph that can be compiled once, mapped over thousands of samples and
@@ -30,6 +36,8 @@ from hframe_id.models import Model
 
 #: Real-axis stability limit of classical RK4: |lambda h| <= 2.785.
 RK4_STABILITY_LIMIT = 2.785
+#: Fewest substeps per sample: keeps the belt modes (|lambda| ~ 330 1/s) accurate to ~1e-8.
+MIN_SUBSTEPS = 4
 
 
 def rk4_step(model: Model, n_substeps: int, dt: float) -> ca.Function:
@@ -70,12 +78,44 @@ def rk4_expression(
     h = dt / n_substeps
     xk = x
     for _ in range(n_substeps):
-        k1 = dynamics(xk, u, p, s)
-        k2 = dynamics(xk + h / 2 * k1, u, p, s)
-        k3 = dynamics(xk + h / 2 * k2, u, p, s)
-        k4 = dynamics(xk + h * k3, u, p, s)
-        xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xk = rk4_substep(dynamics, xk, u, p, s, h)
     return xk
+
+
+def rk4_substep(
+    dynamics: ca.Function,
+    x: ca.SX,
+    u: ca.SX,
+    p: ca.SX,
+    s: ca.SX,
+    h: float | ca.SX,
+) -> ca.SX:
+    """State after one classical RK4 step of length ``h`` [s] from ``x`` under held ``u``.
+
+    Parameters
+    ----------
+    dynamics : (x, u, p, s) -> xdot.
+    x, u, p, s : state, held input [V], parameters (SI) and Coulomb smoothing velocities
+        [m/s, rad/s], as SX.
+    h : substep length [s]: a float (the simulators: ``dt / n_substeps``) or an SX symbol
+        (the fitter's kernels, which take it as an input).
+
+    Returns
+    -------
+    The state after the step, as SX.
+
+    Notes
+    -----
+    With the same value of ``h`` both forms compute the same IEEE operations in the same order
+    (``h / 2`` and ``h / 6`` are rounded once, by Python or at run time), so they agree bit
+    for bit. Reordering any term here changes the generated C and hence the cache key of every
+    compiled kernel (``hframe_id.native.cache_key``).
+    """
+    k1 = dynamics(x, u, p, s)
+    k2 = dynamics(x + h / 2 * k1, u, p, s)
+    k3 = dynamics(x + h / 2 * k2, u, p, s)
+    k4 = dynamics(x + h * k3, u, p, s)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 @lru_cache(maxsize=32)
@@ -102,17 +142,29 @@ def stable_substeps(
     dt: float,
     s: tuple[float, float] | None = None,
     safety: float = 1.5,
-    minimum: int = 4,
+    minimum: int = MIN_SUBSTEPS,
     cap: int = 400,
 ) -> int:
     """RK4 substeps per sample so that |lambda_max| h <= 2.785 / safety, within [minimum, cap].
 
-    ``safety`` 1.5 keeps the fast friction mode well damped (not just bounded); ``minimum`` 4
-    keeps the oscillatory belt modes (|lambda| ~ 330 1/s) accurate to ~1e-8 per sample.
+    lambda_max is the spectral radius of df/dx at rest (``spectral_radius_at_rest``), where
+    the smoothed Coulomb slope is steepest. ``safety`` 1.5 keeps the fast friction mode well
+    damped (not just bounded); ``minimum`` 4 keeps the oscillatory belt modes
+    (|lambda| ~ 330 1/s) accurate to ~1e-8 per sample. The simulators and the sim rig choose
+    their substeps here; the fitter's count for stiff windows (``MultipleShooting.substep_plan``)
+    is this number with the fit's safety and cap (tests/test_simulation_integrator.py).
     """
-    s = tuple(float(v) for v in (s or model.options.smoothing))
+    s = tuple(float(v) for v in (model.options.smoothing if s is None else s))
     p = np.ascontiguousarray(p, dtype=float)
     radius = _cached_radius(model, p.tobytes(), s)
+    return substeps_for_radius(radius, dt, safety, minimum, cap)
+
+
+def substeps_for_radius(
+    radius: float, dt: float, safety: float = 1.5, minimum: int = MIN_SUBSTEPS, cap: int = 400
+) -> int:
+    """Fewest RK4 substeps per sample of ``dt`` [s] with |lambda| h <= 2.785 / ``safety`` for
+    a spectral radius ``radius`` [1/s], within [``minimum``, ``cap``]."""
     needed = math.ceil(radius * dt * safety / RK4_STABILITY_LIMIT)
     return int(min(max(needed, minimum), cap))
 
