@@ -80,11 +80,20 @@ def test_dropped_frames_are_lost_samples(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("fault", "message"),
-    [("--stop-after", "no sample for 100 ms"), ("--disconnect-after", "serial link lost")],
+    ("fault", "timeout_s", "message"),
+    [
+        ("--stop-after", 0.5, "no sample for 500 ms"),
+        ("--disconnect-after", 5.0, "serial link lost"),
+    ],
 )
-def test_link_fault_aborts_the_run_and_finishes_the_file(tmp_path, fault, message):
-    with emulator("--lockstep", fault, "120") as port, SerialRig(port) as rig:
+def test_link_fault_aborts_the_run_and_finishes_the_file(tmp_path, fault, timeout_s, message):
+    """Link timeouts far above a loaded machine's scheduling pauses (the default 0.1 s was
+    once exceeded by a pause before the disconnect on a load average of 12), so that only the
+    injected fault can end the run."""
+    with (
+        emulator("--lockstep", fault, "120") as port,
+        SerialRig(port, link_timeout_s=timeout_s) as rig,
+    ):
         summary = run_experiment(rig, STEP, RunOptions(out=tmp_path / "f.mcap"))
     assert summary.aborted and message in summary.abort_reason
     recording = read_recording(tmp_path / "f.mcap")
