@@ -63,6 +63,8 @@ class FitOutcome:
     status: str
     message: str
     cost: float = math.nan
+    noise: str = ""
+    objective: float = math.nan
     estimates: dict[str, float] = field(default_factory=dict)
     std_errors: dict[str, float] = field(default_factory=dict)
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -103,11 +105,14 @@ def _fit(index, data, params, options, **extra) -> FitOutcome:
             index, "error", f"{type(err).__name__}: {err}", wall_time_s=time.perf_counter() - t0
         )
     free = {n: e for n, e in result.estimates.items() if e.free}
+    noise = result.diagnostics.get("noise", {})
     return FitOutcome(
         index,
         "ok" if result.success else "failed",
         result.message,
         float(result.cost),
+        noise.get("method", ""),
+        _concentrated_objective(data, noise.get("channels", {})),
         {n: float(e.estimate) for n, e in free.items()},
         {n: float(e.std_error) for n, e in free.items()},
         {n: (float(e.ci95[0]), float(e.ci95[1])) for n, e in free.items()},
@@ -116,6 +121,22 @@ def _fit(index, data, params, options, **extra) -> FitOutcome:
         wall_time_s=time.perf_counter() - t0,
         **extra,
     )
+
+
+def _concentrated_objective(recordings, channels: dict) -> float:
+    """-log likelihood with each channel's noise std at its maximum-likelihood value (the
+    residual rms), in the cost's units (chi^2 / 2): sum_j N_j ln(rms_j / sensor std_j) + N / 2.
+    Fits whose noise levels were estimated (model mismatch) weigh their residuals each with
+    their own levels, so their costs are not comparable; this is."""
+    total = 0.0
+    for name, c in channels.items():
+        n = sum(
+            int(np.count_nonzero(rec.valid[:, rec.output_names.index(name)]))
+            for rec in recordings
+            if name in rec.output_names
+        )
+        total += n * (math.log(c["residual_rms"] / c["sensor_std"]) + 0.5)
+    return total if channels else math.nan
 
 
 def multistart_task(
@@ -338,16 +359,21 @@ def summarize_multistart(outcomes: Sequence[FitOutcome]) -> dict[str, Any]:
     the starts that reached it (``spread / std error``: well below 1 means every start found
     the same point, to within the noise's own uncertainty)."""
     ok = [o for o in outcomes if o.ok]
+    # Costs compare only with the noise levels the sensor's in every fit; else the
+    # concentrated likelihood (``_concentrated_objective``), in the same units.
+    by = "cost" if all(o.noise == "sensor" for o in ok) else "objective"
     summary: dict[str, Any] = {
         "starts": len(outcomes),
+        "compared_by": by,
         "by_status": {s: sum(o.status == s for o in outcomes) for s in ("ok", "failed", "error")},
     }
     if not ok:
         summary.update(best=None, reached=[], parameters={})
         return summary
-    best = min(ok, key=lambda o: o.cost)
-    tolerance = SAME_OPTIMUM_COST + SAME_OPTIMUM_RELATIVE * abs(best.cost)
-    reached = [o for o in ok if o.cost - best.cost <= tolerance]
+    score = {o.index: getattr(o, by) for o in ok}
+    best = min(ok, key=lambda o: score[o.index])
+    tolerance = SAME_OPTIMUM_COST + SAME_OPTIMUM_RELATIVE * abs(score[best.index])
+    reached = [o for o in ok if score[o.index] - score[best.index] <= tolerance]
     parameters = {}
     for name, value in best.estimates.items():
         values = np.array([o.estimates[name] for o in reached])
@@ -365,9 +391,10 @@ def summarize_multistart(outcomes: Sequence[FitOutcome]) -> dict[str, Any]:
     summary.update(
         best=best.index,
         best_cost=best.cost,
+        best_value=score[best.index],
         tolerance=tolerance,
         reached=[o.index for o in reached],
-        costs_above_best=sorted(o.cost - best.cost for o in ok if o not in reached),
+        above_best=sorted(score[o.index] - score[best.index] for o in ok if o not in reached),
         parameters=parameters,
     )
     return summary
@@ -382,10 +409,11 @@ def run_bootstrap(
     seed: int = 0,
     on_outcome: Callable[[FitOutcome], None] | None = None,
 ) -> tuple[FitOutcome, list[FitOutcome], str]:
-    """The fit of the data (one task) then ``n_replicates`` refits on resampled data, one task
-    each: ``method`` ``"experiments"`` (the recordings drawn with replacement; the default with
-    several) or ``"parametric"`` (the fit's parameters simulated with fresh sensor noise; the
-    default with one recording). Seeded by ``seed``. Returns (the fit, the replicates in
+    """The fit of the data (one task; by experiments alongside the replicates, parametric
+    before them) and ``n_replicates`` refits on resampled data, one task each: ``method``
+    ``"experiments"`` (the recordings drawn with replacement; the default with several) or
+    ``"parametric"`` (the fit's parameters simulated with fresh sensor noise; the default
+    with one recording). Seeded by ``seed``. Returns (the fit, the replicates in
     order, the method)."""
     if n_replicates < 2:
         raise OptionError(f"--replicates must be >= 2, got {n_replicates}")
@@ -397,16 +425,18 @@ def run_bootstrap(
     rng = np.random.default_rng(seed)
     tag = f"{seed}-{time.time_ns()}"
     with connect() as client:
-        fit = client.submit(
+        fit_future = client.submit(
             bootstrap_task, -1, setup.paths, setup.initial, setup.options, key=f"fit-{tag}"
-        ).result()
-        if on_outcome is not None:
-            on_outcome(fit)
-        if not fit.ok and method == "parametric":
-            raise OptionError(f"the fit of the data did not succeed ({fit.message}); no model "
-                              "to simulate for a parametric bootstrap")  # fmt: skip
-        fitted = setup.initial.replace_values(**fit.estimates) if method == "parametric" else None
-        futures = {}
+        )
+        futures, fitted = {}, None
+        if method == "parametric":  # the replicates need the fit; by experiments they do not
+            fit = _gather(client, {fit_future: -1}, on_outcome)[0]
+            if not fit.ok:
+                raise OptionError(f"the fit of the data did not succeed ({fit.message}); no "
+                                  "model to simulate for a parametric bootstrap")  # fmt: skip
+            fitted = setup.initial.replace_values(**fit.estimates)
+        else:
+            futures[fit_future] = -1
         for b in range(n_replicates):
             picks = None
             if method == "experiments":
@@ -425,7 +455,10 @@ def run_bootstrap(
                 key=f"bootstrap-{tag}-{b}",
             )
             futures[future] = b
-        return fit, _gather(client, futures, on_outcome), method
+        outcomes = _gather(client, futures, on_outcome)
+        if method == "experiments":
+            fit, outcomes = outcomes[0], outcomes[1:]  # index -1 sorts first
+        return fit, outcomes, method
 
 
 def summarize_bootstrap(fit: FitOutcome, replicates: Sequence[FitOutcome]) -> dict[str, Any]:
@@ -468,7 +501,9 @@ def _outcome_line(o: FitOutcome, what: str) -> str:
     label = "fit of the data" if o.index < 0 else f"{what} {o.index:3d}"
     picks = f" recordings {list(o.recordings)}" if o.recordings else ""
     return (
-        f"{label}: {o.status} cost {o.cost:.6g} it {o.iterations} "
+        f"{label}: {o.status} cost {o.cost:.6g}"
+        + (f" (noise {o.noise}, concentrated {o.objective:.8g})" if o.noise == "estimated" else "")
+        + f" it {o.iterations} "
         f"{o.wall_time_s:.1f} s{picks} {o.message}"
     )
 
@@ -489,14 +524,15 @@ def _print_multistart(summary: dict[str, Any], outcomes: Sequence[FitOutcome]) -
     if summary["best"] is None:
         print("no start converged")
         return
+    by = "cost" if summary["compared_by"] == "cost" else "concentrated -log likelihood"
     print(
-        f"best optimum: start {summary['best']}, cost {summary['best_cost']:.8g}; reached by "
-        f"{len(summary['reached'])} of {summary['starts']} starts (cost within "
+        f"best optimum: start {summary['best']}, {by} {summary['best_value']:.8g}; reached by "
+        f"{len(summary['reached'])} of {summary['starts']} starts (within "
         f"{summary['tolerance']:.3g} of the best: one unit of chi^2)"
     )
-    if summary["costs_above_best"]:
-        above = ", ".join(f"{c:.4g}" for c in summary["costs_above_best"])
-        print(f"other converged starts, cost above the best: {above}")
+    if summary["above_best"]:
+        above = ", ".join(f"{c:.4g}" for c in summary["above_best"])
+        print(f"other converged starts, {by} above the best: {above}")
     rows = [
         [name, p["unit"], _g(p["best"]), _g(p["std_error"]), _g(p["spread_std"]),
          f"{p['spread_over_std_error']:.3g}", _g(p["min"]), _g(p["max"])]
