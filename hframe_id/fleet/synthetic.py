@@ -98,9 +98,9 @@ def make_fleet(
     rigs = [f"rig-{i + 1:02d}" for i in range(n_rigs)]
     aged_rigs = sorted(rng.choice(n_rigs, size=n_rigs // 2, replace=False).tolist())
     aging = {rigs[i]: AGING[k % len(AGING)] for k, i in enumerate(aged_rigs)}
+    reduced_aging: dict[str, dict[str, float]] = {}
     if plant == "realistic":
         aging = {rig: (kind, REALISTIC_AGING[kind]) for rig, (kind, _) in aging.items()}
-        reduced_aging = {}
     fits = []
     for r, rig in enumerate(rigs):
         if plant == "realistic":
