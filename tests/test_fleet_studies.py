@@ -107,6 +107,26 @@ def test_parametric_bootstrap_std_is_of_the_order_of_the_std_error(client):
     assert 0.5 < float(np.median(ratios)) < 2.0, ratios
 
 
+def test_bootstrap_over_experiments_resamples_the_recordings(client):
+    setup = study_setup(RECORDINGS, TRUTH)
+    seen = []
+    # Seed 1 draws [1, 1, 2] and [0, 0, 2]: an x and a y step in each. A draw of one direction
+    # only (seed 4: three y steps) leaves the other axis unidentified and takes ~30 s.
+    fit, replicates, method = run_bootstrap(
+        lambda: contextlib.nullcontext(client), setup, 2, seed=1, on_outcome=seen.append
+    )
+    assert method == "experiments"  # the default with several recordings
+    assert sorted(o.index for o in seen) == [-1, 0, 1]  # the fit runs beside the replicates
+    assert fit.index == -1 and fit.ok and fit.recordings == ()
+    picks = [r.recordings for r in replicates]
+    assert all(len(p) == 3 and set(p) <= {0, 1, 2} for p in picks)
+    assert any(len(set(p)) < 3 for p in picks)  # drawn with replacement (seeded)
+    summary = summarize_bootstrap(fit, replicates)
+    assert summary["by_status"]["ok"] == 2
+    assert all(p["bootstrap_std"] > 0 for p in summary["parameters"].values())
+    assert set(summary["parameters"]) == set(fit.estimates)
+
+
 def test_bootstrap_over_experiments_needs_several_recordings(client):
     setup = study_setup(RECORDINGS[:1], TRUTH)
     with pytest.raises(Exception, match="two or more recordings"):
