@@ -32,8 +32,9 @@ from pathlib import Path
 from distributed import Client
 
 from hframe_id.bench import heading
+from hframe_id.digests import sha256_file
 from hframe_id.fleet.job import fit_kinds, run_job, warm_up
-from hframe_id.fleet.keys import batch_options, job_key, sha256_file
+from hframe_id.fleet.keys import batch_options, job_key
 from hframe_id.fleet.manifest import load_manifest
 from hframe_id.fleet.runner import local_cluster, run_batch
 from hframe_id.fleet.store import ResultsStore

@@ -23,20 +23,13 @@ from pathlib import Path
 from typing import Any
 
 from hframe_id import __version__
+from hframe_id.digests import sha256_file
 from hframe_id.errors import FitError
 from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.report import mismatch_statement, output_units
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import portable_path, project_root
-
-
-def sha256_of(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def git_commit() -> str:
@@ -95,7 +88,7 @@ def provenance(
     fit_id: str,
     when: datetime,
 ) -> dict[str, Any]:
-    hashes = [sha256_of(path) for path in dataset_paths]
+    hashes = [sha256_file(path) for path in dataset_paths]
     return {
         "fit_id": fit_id,
         "created_utc": when.isoformat(timespec="seconds"),
@@ -224,7 +217,7 @@ def write_parameter_file(
     """
     when = when or datetime.now(UTC)
     fit_id = unused_fit_id(
-        out_dir, make_fit_id(result.variant, [sha256_of(p) for p in dataset_paths], when)
+        out_dir, make_fit_id(result.variant, [sha256_file(p) for p in dataset_paths], when)
     )
     if not result.success:
         return fit_id, None

@@ -8,19 +8,15 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-from pathlib import Path
 from typing import Any
 
+from hframe_id.digests import sha256_file
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.models import declaration
 
 #: FitOptions fields that do not change a fit's result, left out of its key.
 _NOT_IN_KEY = ("verbose", "progress", "threads")
-
-
-def sha256_file(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def batch_options(job: FitJob) -> FitOptions:

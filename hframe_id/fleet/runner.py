@@ -21,7 +21,8 @@ import dask
 from distributed import Client, LocalCluster, as_completed
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from hframe_id.fleet.keys import base_row, batch_options, job_key, sha256_file
+from hframe_id.digests import sha256_file
+from hframe_id.fleet.keys import base_row, batch_options, job_key
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.fleet.store import ResultsStore
 

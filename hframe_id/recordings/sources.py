@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import difflib
-import hashlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from hframe_id.digests import sha256_file
 from hframe_id.errors import HframeIdError
 
 #: Why a MATLAB v7.3 file cannot be read, and what to do.
@@ -57,7 +57,7 @@ class SourceTable:
 
     def sha256(self) -> str:
         """SHA-256 of the file as hex digits (recorded as ``source.sha256``)."""
-        return hashlib.sha256(self.path.read_bytes()).hexdigest()
+        return sha256_file(self.path)
 
     def at(self, i: int) -> str:
         """Sample ``i`` as a message names it (with its line in a CSV file)."""

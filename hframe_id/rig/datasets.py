@@ -27,7 +27,6 @@ docs/realistic-rig.md).
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +34,7 @@ from typing import Any
 
 import yaml
 
+from hframe_id.digests import sha256_file
 from hframe_id.errors import OptionError, ParameterFileError
 from hframe_id.parameters import ParameterSet, load_parameter_file, save_parameter_file
 from hframe_id.parameters.files import read_text, yaml_error_line
@@ -156,7 +156,7 @@ class PlantSpec:
         reference = save_parameter_file(
             plant.reference(), out / self.reference_file, overwrite=True
         )
-        fields = {"reference": self.reference_file, "reference_sha256": sha256(reference)}
+        fields = {"reference": self.reference_file, "reference_sha256": sha256_file(reference)}
         return load_plant_file(path), fields
 
 
@@ -249,11 +249,6 @@ REALISTIC = Collection(
 )
 
 
-def sha256(path: Path) -> str:
-    """SHA-256 of a file as hex digits (the manifest records one per dataset and truth file)."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def make_datasets(
     out: str | Path,
     only: Sequence[str] = (),
@@ -302,10 +297,10 @@ def make_datasets(
         truth_file = collection.truths[spec.truth].file
         entries[spec.file] = {
             "file": spec.file,
-            "sha256": sha256(out / spec.file),
+            "sha256": sha256_file(out / spec.file),
             "bytes": (out / spec.file).stat().st_size,
             "truth": truth_file,
-            "truth_sha256": sha256(out / truth_file),
+            "truth_sha256": sha256_file(out / truth_file),
             **extra[spec.truth],
             "seed": spec.seed,
             "variant": truth.variant,
@@ -360,6 +355,6 @@ def verify_datasets(folder: str | Path) -> list[str]:
             path = folder / name
             if not path.exists():
                 problems.append(f"{path}: missing")
-            elif digest and sha256(path) != digest:
+            elif digest and sha256_file(path) != digest:
                 problems.append(f"{path}: sha256 differs from the manifest")
     return problems
