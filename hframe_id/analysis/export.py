@@ -131,10 +131,13 @@ def parameters_document(params: ParameterSet) -> dict[str, Any]:
 
 
 def parameters_json(params: ParameterSet) -> str:
+    """The ``json`` format: ``parameters_document`` as indented JSON text."""
     return json.dumps(parameters_document(params), indent=2) + "\n"
 
 
 def parameters_csv(params: ParameterSet) -> str:
+    """The ``csv`` format: a header and one ``name,unit,value,description`` row per
+    parameter (values in SI units)."""
     buffer = io.StringIO()
     writer = csv.DictWriter(
         buffer, fieldnames=["name", "unit", "value", "description"], lineterminator="\n"
@@ -173,6 +176,8 @@ def statespace_document(params: ParameterSet, lin: LinearModel) -> dict[str, Any
 
 
 def statespace_json(params: ParameterSet, lin: LinearModel) -> str:
+    """The ``statespace`` format: ``statespace_document`` (A, B, C, D with the state, input
+    and output names and units) as indented JSON text."""
     return json.dumps(statespace_document(params, lin), indent=2) + "\n"
 
 

@@ -122,6 +122,9 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``hframe-id`` command: parse ``argv`` (default: the process's arguments), run the
+    chosen subcommand and return its exit status (0 success, 1 a fit or check that failed,
+    2 bad input, reported in one line)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(chosen_command(argv))
     args = parser.parse_args(argv)

@@ -10,6 +10,7 @@ from hframe_id.errors import OptionError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``hframe-id batch`` and its options to ``subparsers``."""
     parser = subparsers.add_parser(
         "batch",
         help="fit every entry of a manifest on Dask into Parquet",
@@ -56,6 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id batch``: fit the manifest's pending entries on Dask into the results
+    store; exit status 0 when every fit was stored (failed fits are rows too)."""
     from hframe_id.fleet.manifest import load_manifest
     from hframe_id.fleet.runner import dask_client, run_batch
     from hframe_id.fleet.store import ResultsStore

@@ -12,6 +12,7 @@ from hframe_id.errors import OptionError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``hframe-id fleet make`` and ``hframe-id fleet report`` to ``subparsers``."""
     parser = subparsers.add_parser(
         "fleet",
         help="synthetic fleets; rig histories and drift flags",
@@ -71,6 +72,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_make(args: argparse.Namespace) -> int:
+    """Run ``hframe-id fleet make``: record the synthetic fleet and write its manifest and
+    ``aging.yaml``."""
     from hframe_id.fleet.synthetic import make_fleet
 
     def progress(rig: str, week: int) -> None:
@@ -83,6 +86,8 @@ def run_make(args: argparse.Namespace) -> int:
 
 
 def run_report(args: argparse.Namespace) -> int:
+    """Run ``hframe-id fleet report``: each rig's parameter history, the drift flags as a
+    table or ``--json``, plots and ``fleet-report.md``."""
     from hframe_id.fleet.drift import DEFAULT_THRESHOLD, drift_table
     from hframe_id.fleet.report import (
         flags_table,

@@ -330,18 +330,25 @@ class FitOptions:
 
     @property
     def problem_options(self) -> ProblemOptions:
+        """The problem's part: free and fixed sets, bounds, channel noise levels, latency,
+        friction smoothing."""
         return _part(self, ProblemOptions)
 
     @property
     def transcription_options(self) -> TranscriptionOptions:
+        """The multiple-shooting transcription's part: shooting interval, continuity,
+        substeps, threads."""
         return _part(self, TranscriptionOptions)
 
     @property
     def solver_options(self) -> SolverOptions:
+        """The solver's part: which solver, iteration limit, step and defect tolerances."""
         return _part(self, SolverOptions)
 
     @property
     def statistics_options(self) -> StatisticsOptions:
+        """The error estimates' part: method, confidence level, consider priors,
+        identifiability threshold."""
         return _part(self, StatisticsOptions)
 
     def describe(self) -> dict[str, Any]:

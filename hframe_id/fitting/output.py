@@ -88,6 +88,9 @@ def provenance(
     fit_id: str,
     when: datetime,
 ) -> dict[str, Any]:
+    """The ``provenance`` block of a fitted parameter file: fit id, time (UTC), software and
+    git commit, model and its options, each recording (file, sha256, samples, duration [s]),
+    the initial file and the fit's options, stages and outcome: enough to redo the fit."""
     hashes = [sha256_file(path) for path in dataset_paths]
     return {
         "fit_id": fit_id,
@@ -160,6 +163,9 @@ def noise_levels(result: FitResult) -> dict[str, Any]:
 
 
 def uncertainty(result: FitResult) -> dict[str, Any]:
+    """The ``uncertainty`` block of a fitted parameter file: per free parameter the estimate,
+    standard error and interval (SI units), identifiability and bound flags; the method,
+    confidence level, held parameters and the correlation matrix."""
     level = f"{round(100 * result.options.confidence)} %"
     per_parameter = {}
     for est in result.estimates.values():
@@ -189,6 +195,8 @@ def uncertainty(result: FitResult) -> dict[str, Any]:
 def fitted_parameter_set(
     result: FitResult, prov: dict[str, Any], dataset_names: list[str]
 ) -> ParameterSet:
+    """The fitted parameters as a ``ParameterSet`` carrying ``prov`` and ``uncertainty``,
+    titled by the fitted recordings ``dataset_names``."""
     values = result.parameters.values
     return ParameterSet(
         variant=result.variant,

@@ -57,6 +57,7 @@ class Experiment:
 
     @property
     def n_samples(self) -> int:
+        """Samples in the experiment."""
         return int(self.inputs.shape[0])
 
 
@@ -79,10 +80,12 @@ class FitProblem:
 
     @property
     def free_names(self) -> tuple[str, ...]:
+        """Names of the free parameters, in the order of ``theta``."""
         return tuple(self.model.parameters[i].name for i in self.free)
 
     @property
     def output_names(self) -> tuple[str, ...]:
+        """Names of the model's outputs (the residual channels)."""
         return tuple(s.name for s in self.model.outputs)
 
     @property

@@ -160,6 +160,9 @@ def parameter_table(
     truth: ParameterSet | None,
     truth_label: str = "truth",
 ) -> list[str]:
+    """Markdown rows of the free parameters: reference value (``thesis``, labelled
+    ``label``), fitted value, interval, difference from the reference [%], identifiability
+    and, with ``truth``, the error against it [%]; units in the parameter names."""
     header = (
         "parameter",
         f"reference ({label})",

@@ -61,6 +61,7 @@ class Evaluation:
 
     @property
     def cost(self) -> float:
+        """0.5 |r|^2 of the weighted residuals (chi^2 / 2 with the noise-model weights)."""
         return 0.5 * float(np.sum(self.residual**2))
 
 

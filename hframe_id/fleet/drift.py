@@ -37,6 +37,7 @@ class Drift:
     flagged: bool
 
     def as_dict(self) -> dict:
+        """The row as plain data (the ``--json`` shape)."""
         return asdict(self)
 
 

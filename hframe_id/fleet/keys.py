@@ -26,6 +26,8 @@ def batch_options(job: FitJob) -> FitOptions:
 
 
 def batch_options_for(model: str, free: tuple[str, ...] | None) -> FitOptions:
+    """The options of a batch fit of ``model``: its declared fit defaults, ``free`` (None:
+    the model's default free set), one thread, no progress output."""
     options = FitOptions(free=free, threads=1, verbose=0)
     return dataclasses.replace(options, **dict(declaration(model).fit_defaults))
 

@@ -38,6 +38,7 @@ class BatchSummary:
     wall_time_s: float = 0.0
 
     def line(self) -> str:
+        """One line for the user: planned, skipped, stored by status, wall time [s]."""
         counts = ", ".join(f"{n} {status}" for status, n in sorted(self.stored.items()))
         done = sum(self.stored.values())
         return (
@@ -55,6 +56,7 @@ class KernelWarmUp(WorkerPlugin):
         self.kinds = kinds
 
     def setup(self, worker) -> None:
+        """Build the batch's compiled kernels once on ``worker`` as it starts."""
         from hframe_id.fleet.job import warm_up
 
         warm_up(self.kinds)

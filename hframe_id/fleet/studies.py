@@ -76,6 +76,7 @@ class FitOutcome:
 
     @property
     def ok(self) -> bool:
+        """True when the fit succeeded."""
         return self.status == "ok"
 
 
@@ -625,6 +626,9 @@ def _study_main(action: str, argv: Sequence[str]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m hframe_id.fleet.studies [recovery] | multistart | bootstrap ...``: run a
+    study's fits on a Dask cluster and print its table (or ``--json``); exit status 2 on
+    bad input."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in ("multistart", "bootstrap"):
         return _study_main(argv[0], argv[1:])

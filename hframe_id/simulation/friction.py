@@ -72,6 +72,7 @@ class FrictionOptions:
 
     @property
     def band(self) -> tuple[float, float]:
+        """The stick-slip band: (linear [m/s], angular [rad/s]) velocities."""
         return (self.band_linear_m_per_s, self.band_angular_rad_per_s)
 
     def shape(self, model: Model) -> tuple[float, float]:
