@@ -4,7 +4,7 @@ Every fit is one task, one thread, on the same clusters as ``hframe-id batch``
 (``runner.dask_client``: a LocalCluster or ``--scheduler``); results arrive as they finish
 (``as_completed``) and each is printed as a line.
 
-- **Recovery / coverage** (``run_trials``): the trials of ``hframe_id.fitting.study``
+- **Recovery / coverage** (``run_trials``): the trials of ``hframe_id.studies.recovery``
   (``python -m hframe_id.fleet.studies --seeds 0 1 2 3 --workers 2``).
 - **Multistart** (``run_multistart``): the same recordings fitted from N starts drawn around
   the initial file (each free parameter times exp(N(0, spread)), inside the fit's bounds, which
@@ -40,9 +40,9 @@ from distributed import Client, as_completed
 
 from hframe_id.errors import HframeIdError, OptionError
 from hframe_id.fitting.options import FitOptions
-from hframe_id.fitting.study import Trial, run_trial
 from hframe_id.fleet.keys import batch_options_for
 from hframe_id.fleet.runner import dask_client
+from hframe_id.studies.recovery import Trial, run_trial
 
 #: Two optima whose costs (chi^2 / 2, noise-std units) differ by less than this are the same
 #: optimum: 0.5 is one unit of chi^2, a log-likelihood difference far below what any test

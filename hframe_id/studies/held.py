@@ -15,9 +15,9 @@ import sys
 import numpy as np
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.study import random_truth, simulate_set
 from hframe_id.models import declaration
 from hframe_id.parameters import load_parameter_file
+from hframe_id.studies.recovery import random_truth, simulate_set
 
 #: Truth spread of the other parameters around Table 2.3 (x/÷), as the recovery study's
 #: "from the table" runs; idler offsets drawn uniformly from this range with a random sign.

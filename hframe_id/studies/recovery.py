@@ -1,5 +1,6 @@
-"""Recovery and coverage studies on simulated data (used by tests/test_fit_recovery.py and
-``python -m hframe_id.fitting.study``).
+"""Recovery and coverage studies on simulated data (used by tests/test_fit_recovery.py,
+tests/test_fit_one_axis.py, ``hframe_id.fleet.studies`` and
+``python -m hframe_id.studies.recovery``).
 
 A study draws, per seed, a plant that is not a shipped file (the thesis's values times
 log-uniform factors within x/÷ ``truth_spread``), simulates the standard experiments with the
@@ -26,13 +27,17 @@ from hframe_id.fitting.problem import default_free
 from hframe_id.models import build_model, declaration
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
-from hframe_id.resources import models_dir
-
-MODELS = models_dir()
 
 
 @dataclass
 class Trial:
+    """One seed of a study: the fit's outcome against the plant's truth.
+
+    ``errors`` and ``covered`` are per free parameter (relative error, and whether the
+    reported 95 % interval holds the truth; ``covered_gn``: the textbook Gauss-Newton one);
+    coverage is judged only for parameters reported identified.
+    """
+
     seed: int
     success: bool
     message: str
@@ -49,10 +54,13 @@ class Trial:
 
     @property
     def max_error(self) -> float:
+        """Largest absolute relative error over the free parameters."""
         return max(abs(e) for e in self.errors.values())
 
 
 def random_truth(variant: str, rng: np.random.Generator, spread: float) -> ParameterSet:
+    """A plant that is not a shipped file: the variant's reference table with each default
+    free parameter times a log-uniform factor within x/÷ ``spread``."""
     base = load_parameter_file(declaration(variant).reference_file, variant)
     model = build_model(variant)
     free = default_free(model)
@@ -63,6 +71,8 @@ def random_truth(variant: str, rng: np.random.Generator, spread: float) -> Param
 
 
 def simulate_set(truth: ParameterSet, seed: int, designs=None) -> list:
+    """Recordings of ``designs`` (default: the variant's standard experiments) simulated from
+    ``truth`` at 1 kHz with the rig's sensor models, noise seeded ``seed * 100 + i``."""
     designs = designs or standard_designs(truth.variant, 1e-3)
     return [
         simulate_recording(truth, d.inputs, 1e-3, seed=seed * 100 + i, experiment={"name": d.name})
@@ -79,6 +89,9 @@ def run_trial(
     designs=None,
     from_table: bool = False,
 ) -> Trial:
+    """Fit one seed's plant (:func:`random_truth`, x/÷ ``truth_spread``) from the truth times
+    log-uniform factors within x/÷ ``start_factor`` (or from the reference table with
+    ``from_table``) and compare with the truth."""
     rng = np.random.default_rng(seed)
     truth = random_truth(variant, rng, truth_spread)
     recordings = simulate_set(truth, seed, designs)
@@ -125,7 +138,8 @@ def run_trial(
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m hframe_id.fitting.study")
+    """``python -m hframe_id.studies.recovery``: one line per seed, then the coverage."""
+    parser = argparse.ArgumentParser(prog="python -m hframe_id.studies.recovery")
     parser.add_argument("--variant", default="hframe-8")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     parser.add_argument("--start-factor", type=float, default=3.0)
