@@ -53,7 +53,7 @@ from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.compiled import evaluate, maybe_compile
-from hframe_id.simulation.integrators import stable_substeps
+from hframe_id.simulation.integrators import rk4_substep, stable_substeps
 
 #: Parameters the fitter keeps fixed by default (issue 5): pulley radius, motor constants and
 #: motor 1's amplifier gain (the reference that makes the others identifiable). Everything else
@@ -261,16 +261,15 @@ def _substeps(model: Model, free: tuple[int, ...], compile_c: bool) -> tuple[ca.
         "rates", [x, u, p, s], [xdot, ca.jacobian(xdot, x), ca.jacobian(xdot, p)[:, list(free)]]
     )
 
-    def stage(state: ca.SX, state_sens: ca.SX) -> tuple[ca.SX, ca.SX]:
-        f, f_x, f_p = rates(state, u, p, s)
-        return f, f_x @ state_sens + f_p
-
-    k1, d1 = stage(x, sens)
-    k2, d2 = stage(x + h / 2 * k1, sens + h / 2 * d1)
-    k3, d3 = stage(x + h / 2 * k2, sens + h / 2 * d2)
-    k4, d4 = stage(x + h * k3, sens + h * d3)
-    x_next = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    sens_next = sens + h / 6 * (d1 + 2 * d2 + 2 * d3 + d4)
+    # The state and its sensitivities stacked, z = [x; vec(S)], stepped by the project's RK4.
+    n_free = len(free)
+    z = ca.SX.sym("z", nx * (1 + n_free))
+    f, f_x, f_p = rates(z[:nx], u, p, s)
+    variational = f_x @ ca.reshape(z[nx:], nx, n_free) + f_p
+    augmented = ca.Function("augmented", [z, u, p, s], [ca.vertcat(f, ca.vec(variational))])
+    z_next = rk4_substep(augmented, ca.vertcat(x, ca.vec(sens)), u, p, s, h)
+    x_next = rk4_substep(model.dynamics, x, u, p, s, h)
+    sens_next = ca.reshape(z_next[nx:], nx, n_free)
     plain = ca.Function("ss_substep", [x, u, p, s, h], [x_next])
     with_sens = ca.Function("ss_substep_sens", [x, sens, u, p, s, h], [x_next, sens_next])
     # The project's native compilation (gcc, cached on disk; CasADi's VM without a compiler).
