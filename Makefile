@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed-stamp
 DATA ?= 4V_xmotion.mcap
 FIT_ARGS ?=
 
-.PHONY: venv test lint format fit bench datasets reproduce clean
+.PHONY: venv test test-all lint format fit bench datasets reproduce clean
 
 venv: $(STAMP)
 
@@ -17,7 +17,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --progress-bar on -e '.[test]'
 	@touch $(STAMP)
 
+# The default suite leaves out the long studies marked `slow` (recovery, one-axis, hframe-20
+# fits); test-all runs everything, as CI does.
 test: $(STAMP)
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q -m "not slow"
+
+test-all: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m pytest -q
 
 lint: $(STAMP)

@@ -13,7 +13,7 @@ from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import OptionError
 
 #: The defaults of ``ValidationOptions``, stated in --help without importing the validation
-#: (SciPy, CasADi); tests/test_cli_help.py checks that they agree.
+#: (SciPy, CasADi); tests/cli/test_cli_help.py checks that they agree.
 HELP_DEFAULTS = {"horizon": 10, "window": 10, "max_lag": 25}
 
 

@@ -4,7 +4,7 @@ The one place of the RK4 stages (``rk4_substep``): the simulators, the sim rig a
 loop build their per-sample step from it with a numeric substep length, the fitter's kernels
 (``hframe_id.fitting.kernel``) with a symbolic one. The stages are the same operations in the
 same order either way, so simulator and fitter states agree bit for bit on the same inputs
-(tests/test_simulation_integrator.py).
+(tests/simulation/test_simulation_integrator.py).
 
 Why fixed-step RK4: the input is zero-order held at the sample time (1 ms, section 5.3), so
 each sample is one smooth initial-value problem; a fixed number of RK4 substeps gives a
@@ -17,7 +17,7 @@ Explicit RK4 is stable for |lambda| h < 2.785, so the substep count must follow 
 parameters: ``stable_substeps`` bounds the spectral radius of the Jacobian at rest (where the
 tanh slope is largest) and adds a safety factor.
 
-Accuracy (tests/test_simulation_integrator.py, docs/friction.md): against scipy's Radau with
+Accuracy (tests/simulation/test_simulation_integrator.py, docs/friction.md): against scipy's Radau with
 rtol 1e-10 on 2-10 V steps, reversals and stops with Coulomb friction, the default substeps keep
 every position within 2 um and every velocity within 0.5 mm/s for all three variants (angles as
 belt length r phi; measured 0.3-0.7 um and 0.03-0.1 mm/s). The error is set by how well the
@@ -152,7 +152,7 @@ def stable_substeps(
     damped (not just bounded); ``minimum`` 4 keeps the oscillatory belt modes
     (|lambda| ~ 330 1/s) accurate to ~1e-8 per sample. The simulators and the sim rig choose
     their substeps here; the fitter's count for stiff windows (``MultipleShooting.substep_plan``)
-    is this number with the fit's safety and cap (tests/test_simulation_integrator.py).
+    is this number with the fit's safety and cap (tests/simulation/test_simulation_integrator.py).
     """
     s = tuple(float(v) for v in (model.options.smoothing if s is None else s))
     p = np.ascontiguousarray(p, dtype=float)

@@ -1,5 +1,5 @@
-"""Recovery and coverage studies on simulated data (used by tests/test_fit_recovery.py,
-tests/test_fit_one_axis.py, ``hframe_id.fleet.studies`` and
+"""Recovery and coverage studies on simulated data (used by tests/fitting/test_fit_recovery.py,
+tests/fitting/test_fit_one_axis.py, ``hframe_id.fleet.studies`` and
 ``python -m hframe_id.studies.recovery``).
 
 A study draws, per seed, a plant that is not a shipped file (the thesis's values times

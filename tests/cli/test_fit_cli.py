@@ -1,0 +1,209 @@
+"""`hframe-id fit` end to end: files on success, none on failure, errors before solving."""
+
+import contextlib
+import io
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hframe_id.cli import main
+from hframe_id.parameters import load_parameter_file
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "datasets" / "4V_xmotion.mcap"
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fits")
+    status = main(["fit", str(DATA), "--out-dir", str(out), "--quiet"])
+    return status, out
+
+
+def test_successful_fit_writes_a_loadable_versioned_parameter_file(fitted):
+    status, out = fitted
+    assert status == 0
+    (yaml_path,) = out.glob("*.yaml")
+    params = load_parameter_file(yaml_path, variant="hframe-8")
+    prov = params.provenance
+    assert prov["fit_id"] == yaml_path.stem
+    assert prov["datasets"][0]["sha256"] and len(prov["datasets"][0]["sha256"]) == 64
+    # recorded relative to the project (the same on every clone), not to the working directory
+    assert prov["datasets"][0]["file"] == "datasets/4V_xmotion.mcap"
+    assert prov["solver"]["success"] is True
+    # sim-rig data fitted with the model that made them: residuals at the noise model's level
+    # (1 = exactly the noise; the smoothed-Coulomb and integrator differences add a little)
+    assert 0.8 < prov["solver"]["residual_rms_noise_std"] < 1.5
+    assert set(prov["free_parameters"]) >= {"k_l", "k_r", "k_b", "g_2"}
+    # every free parameter has estimate, error, interval and identifiability
+    for key, entry in params.uncertainty["parameters"].items():
+        low, high = entry["interval_95"]
+        assert low <= entry["estimate"] <= high, key
+        assert isinstance(entry["identified"], bool)
+    # the rig's aged belt (k x 0.85 of Table 4.1) must show in the fit, far beyond the interval
+    truth = load_parameter_file(ROOT / "datasets" / "truth" / "hframe-8-rig.yaml")
+    assert params.values["k_l"] == pytest.approx(truth.values["k_l"], rel=0.01)
+
+
+def test_report_compares_with_table_4_2_and_truth(fitted):
+    _, out = fitted
+    (report,) = out.glob("*-report.md")
+    text = report.read_text()
+    assert "Table 4.1 + 4.2" in text and "error vs truth" in text
+    plots = list(out.glob("*-plots/*.png"))
+    assert any(p.name == "4V_xmotion.png" for p in plots)
+
+
+def test_failed_fit_writes_no_parameter_file(tmp_path, capsys):
+    status = main(
+        ["fit", str(DATA), "--out-dir", str(tmp_path), "--quiet", "--max-iterations", "1"]
+    )
+    assert status == 1
+    assert not list(tmp_path.glob("*.yaml"))
+    (report,) = tmp_path.glob("*-report.md")
+    text = report.read_text()
+    assert "FAILED" in text and "not assessed (fit failed)" in text
+    out, err = capsys.readouterr()
+    assert "no parameter file written" in err
+    # a failed fit's error estimates mean nothing: no parameter is called identified
+    assert "not assessed (fit failed)" in out and " identified" not in out
+
+
+def test_same_second_fits_never_share_files(tmp_path):
+    from hframe_id.fitting.output import unused_fit_id
+
+    assert unused_fit_id(tmp_path, "hframe-8-x") == "hframe-8-x"
+    (tmp_path / "hframe-8-x-report.md").write_text("a failed fit's report")
+    assert unused_fit_id(tmp_path, "hframe-8-x") == "hframe-8-x-2"
+    (tmp_path / "hframe-8-x-2-plots").mkdir()
+    assert unused_fit_id(tmp_path, "hframe-8-x") == "hframe-8-x-3"
+
+
+def test_bare_names_are_found_from_any_directory(tmp_path, monkeypatch):
+    from hframe_id.cli.fit_command import resolve_dataset
+
+    monkeypatch.chdir(tmp_path)
+    assert resolve_dataset("4V_xmotion.mcap").resolve() == DATA.resolve()
+
+
+def test_an_unusable_out_dir_fails_before_solving(tmp_path, capsys):
+    target = tmp_path / "a_file"
+    target.write_text("not a directory")
+    status = main(["fit", str(DATA), "--out-dir", str(target / "sub"), "--quiet"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hframe-id: error: --out-dir") and "is not a directory" in err
+    status = main(["fit", str(DATA), "--out-dir", str(target), "--quiet"])
+    assert status == 2
+    assert "exists and is not a directory" in capsys.readouterr().err
+
+
+def test_a_fit_far_above_the_noise_level_fails(tmp_path, capsys):
+    # The same converged fit as above (residual rms ~1 noise std) against a limit below it:
+    # what a local optimum far from the data looks like to the user.
+    status = main(["fit", str(DATA), "--out-dir", str(tmp_path), "--quiet", "--max-misfit", "0.5"])
+    assert status == 1
+    assert not list(tmp_path.glob("*.yaml"))
+    assert "converged to a poor fit: residual rms" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["no_such.mcap"], "no such recording"),
+        ([str(DATA), "--free", "k_q"], "k_q"),
+        ([str(DATA), "--bounds", "k_l=1:2"], "k_l"),
+        ([str(DATA), "--bounds", "k_l=abc"], "LOW:HIGH"),
+        ([str(DATA), "--shooting-interval", "0"], "shooting interval"),
+        ([str(DATA), "--max-misfit", "0"], "max_misfit"),
+        ([str(DATA), "--initial", str(ROOT / "models" / "one-axis-table2.3.yaml")], "one-axis"),
+        ([str(DATA), str(ROOT / "datasets" / "5V_oneaxis.mcap")], "one-axis"),
+    ],
+)
+def test_bad_input_fails_before_solving_and_writes_nothing(tmp_path, capsys, args, message):
+    status = main(["fit", *args, "--out-dir", str(tmp_path / "out"), "--quiet"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hframe-id: error:") and message in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_fit_file_header_is_plain_yaml(fitted):
+    _, out = fitted
+    (yaml_path,) = out.glob("*.yaml")
+    doc = yaml.safe_load(yaml_path.read_text())
+    assert list(doc)[:4] == ["format_version", "model", "title", "source"]
+    assert all(" [" in key for key in doc["parameters"])
+
+
+def _record(folder: Path, params: Path, volts: tuple[float, float], name: str) -> Path:
+    """A 0.4 s step recorded on the sim rig from ``params`` (unpaced, ~1 s)."""
+    path = folder / name
+    v1, v2 = (str(v) for v in volts)
+    status = main(["record", "--rig", "sim", "--params", str(params), "--fast", "--v1", v1,
+                   "--v2", v2, "--step", "0.3", "--duration", "0.4", "--out", str(path),
+                   "--quiet"])  # fmt: skip
+    assert status == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def mismatched_fit(tmp_path_factory):
+    """An x-motion step of the 20th-order plant (Table 3.1) fitted with hframe-8: the model
+    cannot follow the encoders at their quantization noise (~10 s)."""
+    folder = tmp_path_factory.mktemp("h20")
+    data = _record(folder, ROOT / "models" / "hframe-20-table3.1.yaml", (-4, 4), "h20_x.mcap")
+    out = folder / "fits"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        status = main(["fit", str(data), "--model", "hframe-8", "--free", "k_l,k_r",
+                       "--out-dir", str(out), "--quiet"])  # fmt: skip
+    return status, out, printed.getvalue()
+
+
+def test_hframe20_plant_fitted_with_hframe8_succeeds_with_a_mismatch_statement(mismatched_fit):
+    status, out, printed = mismatched_fit
+    assert status == 0
+    assert "model mismatch: The model does not follow the data" in printed
+    assert "estimated noise std" in printed and " mm " in printed
+    (report,) = out.glob("*-report.md")
+    text = report.read_text()
+    # the plant's truth compared through its section-4.1 reduction, not a KeyError
+    assert "truth (section-4.1 reduction of the plant)" in text
+    assert "does not follow the data at the sensors' noise level" in text
+    (yaml_path,) = out.glob("*.yaml")
+    noise = load_parameter_file(yaml_path, variant="hframe-8").provenance["noise"]
+    assert noise["model_mismatch"] is True
+    assert noise["channels"]["phi1"]["residual_rms [sensor std]"] > 10
+
+
+def test_initial_of_another_variant_fails_before_reading_recordings(tmp_path, capsys):
+    h20 = str(ROOT / "models" / "hframe-20-table3.1.yaml")
+    status = main(["fit", "no_such.mcap", "--model", "hframe-8", "--initial", h20,
+                   "--out-dir", str(tmp_path / "out")])  # fmt: skip
+    assert status == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("hframe-id: error:")
+    assert "'hframe-20'" in err and "'hframe-8'" in err and "no such recording" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_several_recordings_get_a_leave_one_out_table(tmp_path, capsys):
+    table = ROOT / "models" / "hframe-8-table4.2.yaml"
+    files = [
+        str(_record(tmp_path, table, volts, name))
+        for name, volts in (("x.mcap", (-4, 4)), ("y.mcap", (-4, -4)))
+    ]
+    capsys.readouterr()
+    args = ["fit", *files, "--free", "k_l,k_r", "--noise", "sensor"]
+    assert main([*args, "--out-dir", str(tmp_path / "cv")]) == 0
+    err = capsys.readouterr().err
+    assert "cross-validation 1/2: fitting without x.mcap" in err
+    assert "cross-validation 2/2: fitting without y.mcap" in err
+    (report,) = (tmp_path / "cv").glob("*-report.md")
+    assert "## Leave-one-recording-out cross-validation" in report.read_text()
+    assert main([*args, "--out-dir", str(tmp_path / "no-cv"), "--no-cross-validation"]) == 0
+    assert "cross-validation" not in capsys.readouterr().err
+    (report,) = (tmp_path / "no-cv").glob("*-report.md")
+    assert "Leave-one-recording-out" not in report.read_text()

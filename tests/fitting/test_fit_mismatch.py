@@ -1,0 +1,129 @@
+"""The fitter on data its model did not generate: l1 merit, estimated noise levels, and the
+consider covariance of held parameters."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hframe_id.errors import OptionError
+from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.consider import consider_covariance
+from hframe_id.fitting.solver import MERIT_RHO, _penalty_parameter
+from hframe_id.parameters import load_parameter_file
+from hframe_id.rig.protocols import StepProtocol
+from hframe_id.rig.realistic import record_realistic, shipped_plant
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+def test_consider_covariance_is_the_spread_of_estimates_under_held_errors():
+    """Linear least squares y = A a + C c: holding c at a wrong value moves the estimate of a
+    by S dc; over many draws of dc with relative std s, cov(a) is S diag(s^2) S^T."""
+    rng = np.random.default_rng(7)
+    a_mat, c_mat = rng.normal(size=(200, 3)), rng.normal(size=(200, 2))
+    c_mat += a_mat[:, :2] * 0.8  # held columns correlated with estimated ones
+    std = np.array([0.2, 0.1])
+    draws = rng.normal(size=(20000, 2)) * std
+    estimates = np.linalg.lstsq(a_mat, -(draws @ c_mat.T).T, rcond=None)[0].T
+    predicted = consider_covariance(a_mat, c_mat, std)
+    # 20000 draws: sampling error of a covariance ~ sqrt(2 / 20000) = 1 % of its scale.
+    assert np.allclose(np.cov(estimates.T), predicted, rtol=0.05, atol=0.03 * predicted.max())
+
+
+def test_penalty_parameter_makes_every_full_step_predict_a_decrease():
+    for change, l1 in ((10.0, 1.0), (1e9, 3.0), (-5.0, 2.0), (0.5, 4.0)):
+        mu = _penalty_parameter(1.0, change, l1)
+        assert mu >= 1.0
+        assert mu * l1 - change >= MERIT_RHO * mu * l1 - 1e-9 * abs(change)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("noise", "guess"), ("consider", {"J_2": -0.2}), ("consider", [1])]
+)
+def test_bad_noise_and_consider_options_are_one_line_errors(field, value):
+    with pytest.raises(OptionError, match=field):
+        FitOptions(**{field: value})
+
+
+@pytest.fixture(scope="module")
+def realistic_steps():
+    """Two 0.6 s steps of the realistic hframe-20 plant (stick-slip with a Stribeck peak,
+    current limit, actuation delay, laser latency): data the hframe-8 model cannot follow."""
+    plant = shipped_plant("hframe-20")
+    steps = [((-4.0, 4.0), 11), ((-4.0, -4.0), 12)]
+    return [
+        record_realistic(plant, StepProtocol(v, step_s=0.4, duration_s=0.6), seed=s)
+        for v, s in steps
+    ]
+
+
+def test_mismatched_data_converge_with_estimated_noise_levels(realistic_steps):
+    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    options = FitOptions(free=("k_l", "k_r", "M_cart", "M_bridge", "b_cart", "b_bridge"))
+    result = fit_recordings(realistic_steps, table, options)
+    noise = result.diagnostics["noise"]
+    assert result.success, result.message
+    assert noise["method"] == "estimated" and noise["rounds"] >= 1
+    # A real simulated trajectory: continuity defects at the solver's tolerance.
+    assert result.diagnostics["max_defect"] <= options.defect_tol
+    # The encoders see the model error far above their step (measured: ~1e3 sensor std).
+    assert min(noise["channels"][n]["residual_rms_sensor_std"] for n in ("phi1", "phi2")) > 10
+    for name, channel in noise["channels"].items():
+        # At the fixed point the residual rms is the std the fit weighed with (the iteration
+        # stops once no std moves by more than NOISE_RTOL = 5 %; the last round may move it
+        # by that much again: 2x margin). Never below the sensor's own noise.
+        assert channel["weight_std"] >= channel["sensor_std"]
+        ratio = channel["residual_rms"] / channel["weight_std"]
+        assert abs(math.log(ratio)) < 0.1, (name, ratio)
+
+
+def test_matched_data_keep_the_sensor_noise_levels():
+    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    from hframe_id.recordings.simulated import simulate_recording
+
+    u = np.zeros((400, 2))
+    u[50:350] = (-4.0, 4.0)
+    result = fit_recordings(
+        [simulate_recording(table, u, seed=3)], table, FitOptions(free=("k_l", "b_bridge"))
+    )
+    assert result.success
+    assert result.diagnostics["noise"]["method"] == "sensor"
+
+
+def test_ipopt_solver_reaches_the_gauss_newton_optimum():
+    """FitOptions(solver="ipopt"): the all-window stage by CasADi's IPOPT on the same
+    transcription lands on the Gauss-Newton fit (both to step 1e-6 / IPOPT tol 1e-10; 1e-4
+    relative is far above either's convergence and far below any physical difference)."""
+    from hframe_id.recordings.simulated import simulate_recording
+
+    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    u = np.zeros((400, 2))
+    u[50:350] = (-4.0, 4.0)
+    truth = table.replace_values(k_l=table.values["k_l"] * 0.9, b_bridge=30.0)
+    recordings = [simulate_recording(truth, u, seed=5)]
+    fits = {
+        solver: fit_recordings(
+            recordings, table, FitOptions(free=("k_l", "b_bridge"), solver=solver)
+        )
+        for solver in ("gauss-newton", "ipopt")
+    }
+    assert all(f.success for f in fits.values()), [f.message for f in fits.values()]
+    assert "IPOPT" in fits["ipopt"].stages[-1].name
+    for name in ("k_l", "b_bridge"):
+        a, b = (fits[s].estimates[name].estimate for s in fits)
+        assert a == pytest.approx(b, rel=1e-4), name
+
+
+def test_held_parameters_and_their_prior_are_stated():
+    """A fit with held table values says which, at what value and with what prior."""
+    from hframe_id.fitting.fit import FitResult
+
+    result = FitResult.__new__(FitResult)
+    result.diagnostics = {"consider": {"held_relative_std": {"J_2": 0.2}}}
+    result.parameters = load_parameter_file(MODELS / "one-axis-table2.3.yaml")
+    statement = result.held_statement()
+    assert "J_2 = 6.3e-05 (+/-20 %)" in statement and "consider covariance" in statement
+    result.diagnostics = {"consider": {"held_relative_std": {}}}
+    assert result.held_statement() is None

@@ -1,0 +1,130 @@
+"""The fit report and parameter file on data the model did not generate: the truth through the
+section-4.1 reduction, the model-mismatch statement, and no partial outputs on a crash."""
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting import report as report_module
+from hframe_id.fitting.output import noise_levels
+from hframe_id.fitting.report import comparable_truth, mismatch_statement, write_report
+from hframe_id.parameters import load_parameter_file
+from hframe_id.parameters.reduce import reduce_to_hframe8
+from hframe_id.recordings.simulated import simulate_recording
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+REDUCED_LABEL = "truth (section-4.1 reduction of the plant)"
+
+
+@pytest.fixture(scope="module")
+def h20_plant():
+    return load_parameter_file(MODELS / "hframe-20-table3.1.yaml")
+
+
+@pytest.fixture(scope="module")
+def mismatched(h20_plant):
+    """A 0.4 s x-motion step of the 20th-order plant fitted with hframe-8 (k_l, k_r free):
+    the belt modes the 8th-order model lacks put the encoder residuals far above their
+    quantization noise, so the fit weighs the channels by estimated noise levels (~8 s)."""
+    u = np.zeros((400, 2))
+    u[50:350] = (-4.0, 4.0)
+    rec = dataclasses.replace(
+        simulate_recording(h20_plant, u, seed=3), path=Path("h20_xmotion.mcap")
+    )
+    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    result = fit_recordings([rec], table, FitOptions(free=("k_l", "k_r"), verbose=0))
+    assert result.success, result.message
+    return result, [rec]
+
+
+def test_truth_of_another_variant_is_reduced_or_skipped_with_a_note(h20_plant):
+    recordings = [SimpleNamespace(truth=h20_plant), SimpleNamespace(truth=h20_plant)]
+    truth, label, note = comparable_truth(recordings, "hframe-8")
+    assert truth.variant == "hframe-8" and label == REDUCED_LABEL
+    assert truth.values == reduce_to_hframe8(h20_plant).values
+    assert "section-4.1 reduction" in note
+    truth, label, note = comparable_truth(recordings, "hframe-20")
+    assert truth is h20_plant and label == "truth"
+    truth, label, note = comparable_truth(recordings, "one-axis")
+    assert truth is None and note.startswith("No truth column") and "hframe-20" in note
+    # recordings of different plants: no common truth, nothing to say
+    other = h20_plant.replace_values(k_1=1.1 * h20_plant.values["k_1"])
+    assert comparable_truth([recordings[0], SimpleNamespace(truth=other)], "hframe-8")[0] is None
+
+
+def test_report_of_a_mismatched_fit_states_it_and_compares_with_the_reduced_plant(
+    mismatched, tmp_path
+):
+    result, recordings = mismatched
+    path = write_report(result, recordings, "fit-a", None, tmp_path)
+    text = path.read_text()
+    assert "## Model mismatch" in text
+    assert "does not follow the data at the sensors' noise level" in text
+    assert "| channel | sensor std | estimated noise std | residual rms |" in text
+    # encoder residuals in rad, laser residuals in mm, each also in sensor std
+    assert " rad | " in text and " mm | " in text
+    assert REDUCED_LABEL in text and "error vs truth" in text
+    assert sorted(p.name for p in (tmp_path / "fit-a-plots").iterdir()) == [
+        "correlation.png",
+        "h20_xmotion.png",
+    ]
+    assert not list(tmp_path.glob(".*"))  # no staging folder left
+
+
+def test_parameter_file_provenance_carries_the_noise_levels_with_units(mismatched):
+    result, _ = mismatched
+    levels = noise_levels(result)
+    assert levels["model_mismatch"] is True and levels["weights"] == "estimated from the residuals"
+    assert levels["statement"] == mismatch_statement(result)
+    assert set(levels["channels"]["phi1"]) == {
+        "sensor_std [rad]",
+        "weight_std [rad]",
+        "residual_rms [rad]",
+        "residual_rms [sensor std]",
+    }
+    assert "residual_rms [m]" in levels["channels"]["x"]
+
+
+def test_sensor_weighted_fit_has_no_mismatch_statement(mismatched):
+    result, _ = mismatched
+    sensor = dataclasses.replace(
+        result,
+        diagnostics={**result.diagnostics, "noise": {**result.diagnostics["noise"], "rounds": 0,
+                                                       "method": "sensor"}},
+    )  # fmt: skip
+    assert mismatch_statement(sensor) is None
+    assert noise_levels(sensor)["model_mismatch"] is False
+
+
+@pytest.mark.parametrize("plot", ["plot_experiment", "plot_correlation"])
+def test_a_crash_while_writing_leaves_no_files(mismatched, tmp_path, monkeypatch, plot):
+    from hframe_id.cli.fit_command import _write_outputs
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr(report_module, plot, broken)
+    result, recordings = mismatched
+    data = tmp_path / "h20_xmotion.mcap"
+    data.write_bytes(b"stands in for the recording (hashed for the fit id)")
+    out = tmp_path / "fits"
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        _write_outputs(result, recordings, [data], MODELS / "hframe-8-table4.2.yaml", out, None)
+    # the parameter file written before the report is removed again, and the folder made for it
+    assert not out.exists()
+    out.mkdir()
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        _write_outputs(result, recordings, [data], MODELS / "hframe-8-table4.2.yaml", out, None)
+    assert out.is_dir() and not list(out.iterdir())
+
+
+def test_importing_the_report_sets_no_matplotlib_backend():
+    code = "import sys, hframe_id.fitting.report; print('matplotlib' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"
