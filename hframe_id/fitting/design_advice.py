@@ -17,7 +17,7 @@ import numpy as np
 from hframe_id.errors import FitError
 from hframe_id.fitting.designs import standard_designs
 from hframe_id.fitting.options import FitOptions
-from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.problem import FitProblem, build_problem, rig_dac
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState
 from hframe_id.fitting.statistics import Statistics
@@ -120,13 +120,8 @@ def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.nd
         laser_min_m=float(rig.get("laser_min_m", -math.inf)),
         laser_max_m=float(rig.get("laser_max_m", math.inf)),
     )
-    applied = design.inputs
-    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
-        applied = SensorModel(
-            dac_bits=int(rig["dac_bits"]),
-            dac_min_v=float(rig["dac_min_v"]),
-            dac_max_v=float(rig["dac_max_v"]),
-        ).dac(design.inputs)
+    dac = rig_dac(rig)
+    applied = design.inputs if dac is None else dac.dac(design.inputs)
     states = simulate(model, p, applied, problem.sample_period_s, smoothing=problem.smoothing)
     outputs = np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T
     valid = np.ones_like(outputs, dtype=bool)

@@ -9,10 +9,10 @@ so the Gauss-Newton Jacobian is the Jacobian of the residuals actually computed)
 
 with S = d x / d(x_0, p_free). Phi is ``hframe_id.simulation.integrators.rk4_substep``, the
 simulators' RK4 step, with the substep length h a symbol (so the fitter's states are bitwise
-the simulator's: tests/simulation/test_simulation_integrator.py). The substep is an SX graph (~10^4 flat
-instructions), generated as C and compiled once per (model, free set) by ``hframe_id.native``
-(cached on disk, so later fits load it in milliseconds). Where no C compiler is available,
-CasADi's SX virtual machine runs the same graph about 2x slower.
+the simulator's: tests/simulation/test_simulation_integrator.py). The substep is an SX graph
+(~10^4 flat instructions), generated as C and compiled once per (model, free set) by
+``hframe_id.native`` (cached on disk, so later fits load it in milliseconds). Where no C
+compiler is available, CasADi's SX virtual machine runs the same graph about 2x slower.
 
 Samples, windows and experiments are then layered on top: a C loop compiled with the substep
 (``DRIVER``: windows split over threads, samples and substeps in sequence), or, without a C

@@ -157,19 +157,26 @@ def resolve_free(model: Model, options: ProblemOptions) -> list[str]:
     return free
 
 
+def rig_dac(rig: dict) -> SensorModel | None:
+    """The rig's DAC (``dac_bits``, ``dac_min_v`` [V], ``dac_max_v`` [V] in its metadata) as a
+    sensor model, or None when the metadata do not describe one."""
+    if not all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
+        return None
+    return SensorModel(
+        dac_bits=int(rig["dac_bits"]),
+        dac_min_v=float(rig["dac_min_v"]),
+        dac_max_v=float(rig["dac_max_v"]),
+    )
+
+
 def applied_inputs(recording: Recording) -> np.ndarray:
-    """Voltages the plant saw: the recording's applied voltages if it has them, else the
-    commanded ones through the rig's DAC (12 bit, +/-10 V unless the rig metadata say)."""
+    """Voltages the plant saw [V]: the recording's applied voltages if it has them, else the
+    commanded ones through the rig's DAC when its metadata describe one (``rig_dac``)."""
     applied = getattr(recording, "applied", None)
     if applied is not None:
         return np.asarray(applied, dtype=float)
-    rig = recording.rig
-    if all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
-        dac = SensorModel(
-            dac_bits=int(rig["dac_bits"]),
-            dac_min_v=float(rig["dac_min_v"]),
-            dac_max_v=float(rig["dac_max_v"]),
-        )
+    dac = rig_dac(recording.rig)
+    if dac is not None:
         return dac.dac(recording.inputs)
     return np.asarray(recording.inputs, dtype=float)
 

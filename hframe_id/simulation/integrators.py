@@ -17,12 +17,11 @@ Explicit RK4 is stable for |lambda| h < 2.785, so the substep count must follow 
 parameters: ``stable_substeps`` bounds the spectral radius of the Jacobian at rest (where the
 tanh slope is largest) and adds a safety factor.
 
-Accuracy (tests/simulation/test_simulation_integrator.py, docs/friction.md): against scipy's Radau with
-rtol 1e-10 on 2-10 V steps, reversals and stops with Coulomb friction, the default substeps keep
-every position within 2 um and every velocity within 0.5 mm/s for all three variants (angles as
-belt length r phi; measured 0.3-0.7 um and 0.03-0.1 mm/s). The error is set by how well the
-substeps resolve the tanh knee, not by RK4's order.
-"""
+Accuracy (tests/simulation/test_simulation_integrator.py, docs/friction.md): against scipy's
+Radau with rtol 1e-10 on 2-10 V steps, reversals and stops with Coulomb friction, the default
+substeps keep every position within 2 um and every velocity within 0.5 mm/s for all three
+variants (angles as belt length r phi; measured 0.3-0.7 um and 0.03-0.1 mm/s). The error is set
+by how well the substeps resolve the tanh knee, not by RK4's order."""
 
 from __future__ import annotations
 
