@@ -1,8 +1,7 @@
 """Standard experiments a fit can ask for: the thesis's open-loop tests (as shipped in datasets/).
 
-Used to say which experiments would identify a parameter that the fitted data do not: each
-candidate is simulated at the fitted parameters (noise-free), its Gauss-Newton information is
-added to the data's, and the parameter's standard error is recomputed.
+The candidates of the experiment-design advice (``hframe_id.fitting.design_advice``): the
+input sequences only, per variant, at a given sample period.
 """
 
 from __future__ import annotations
