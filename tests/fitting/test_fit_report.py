@@ -2,6 +2,7 @@
 section-4.1 reduction, the model-mismatch statement, and no partial outputs on a crash."""
 
 import dataclasses
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -124,7 +125,18 @@ def test_a_crash_while_writing_leaves_no_files(mismatched, tmp_path, monkeypatch
     assert out.is_dir() and not list(out.iterdir())
 
 
-def test_importing_the_report_sets_no_matplotlib_backend():
-    code = "import sys, hframe_id.fitting.report; print('matplotlib' in sys.modules)"
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert done.stdout.strip() == "False"
+@pytest.mark.parametrize("module", ["hframe_id.fitting.report", "hframe_id.fleet.report"])
+def test_importing_a_report_sets_no_matplotlib_backend(module):
+    """No import-time side effects: the backend of a program that imports a report module is
+    its own (pyplot is never imported; the figures are drawn on Agg canvases when saved)."""
+    code = (
+        # The raw rcParams entry: matplotlib.get_backend() would itself import pyplot.
+        "import sys, matplotlib; raw = lambda: dict.__getitem__(matplotlib.rcParams, 'backend'); "
+        f"before = raw(); import {module}; "
+        "print('matplotlib.pyplot' in sys.modules, raw() == before)"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
+    assert done.stdout.split() == ["False", "True"]
