@@ -129,9 +129,7 @@ DECLARATION = ModelDeclaration(
     lagrangian=lagrangian,
     reference_file=thesis_file("hframe-20-table3.1.yaml"),
     reference_label="Table 3.1",
-    fixed=MEASURED
-    + tuple(
-        f"l_{i}" for i in (3, 4, 5, 6, 7, 8)
-    ),  # belt lengths are measured geometry (section 4.6)
+    # Belt lengths are measured geometry (section 4.6).
+    fixed=(*MEASURED, *(f"l_{i}" for i in (3, 4, 5, 6, 7, 8))),
     source=__name__,
 )
