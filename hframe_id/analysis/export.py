@@ -32,7 +32,6 @@ never over an existing file unless asked).
 from __future__ import annotations
 
 import csv
-import difflib
 import io
 import json
 import os
@@ -48,6 +47,7 @@ from hframe_id.atomic import replace_atomically
 from hframe_id.errors import ModelError, OptionError
 from hframe_id.models import parameter_specs
 from hframe_id.parameters import ParameterSet
+from hframe_id.parameters.files import suggest
 
 if TYPE_CHECKING:
     from hframe_id.analysis.linear import LinearModel
@@ -61,16 +61,11 @@ POLE_ZERO_UNITS = {
 }
 
 
-def _suggest(word: str, choices: Sequence[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
 def export_format(name: str) -> ExportFormat:
     """The export format called ``name``; an unknown name is an ``OptionError`` with a hint."""
     if name not in FORMATS:
         raise OptionError(
-            f"unknown export format {name!r}{_suggest(name, list(FORMATS))}; "
+            f"unknown export format {name!r}{suggest(name, list(FORMATS))}; "
             f"valid: {', '.join(FORMATS)}"
         )
     return FORMATS[name]
@@ -80,7 +75,7 @@ def resolve_signal(names: Sequence[str], name: str, kind: str, variant: str) -> 
     """Check that ``name`` is one of a model's input or output names (``kind``)."""
     if name not in names:
         raise ModelError(
-            f"{variant} has no {kind} named {name!r}{_suggest(name, names)}; "
+            f"{variant} has no {kind} named {name!r}{suggest(name, list(names))}; "
             f"valid: {', '.join(names)}"
         )
     return name
