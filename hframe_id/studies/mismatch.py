@@ -2,13 +2,16 @@
 plants, judged on a held-out recording against the plant's own section-4.1 reduction.
 
 Per seed: a fresh realistic plant (``realistic_plant("hframe-20", seed)``; seed -1: the shipped
-one), the six section-4.4 steps recorded with its sensors, and an hframe-8 fit from Table 4.2
-(``FitOptions()``: noise levels estimated when the model cannot follow the data). The fit and
-the reduction are then simulated on two held-out recordings (``HELD_OUT``; simulation fit in
-percent per channel, ``hframe_id.validation``). Also the coverage under mismatch: over noise
-seeds of one plant, how often each 95 % interval holds the across-seed mean estimate.
+one), a training set recorded with its sensors (``--train``, ``TRAINING_SETS``: the six
+section-4.4 steps, or the steps and a 3 V multisine of another phase seed than the held-out
+one), and an hframe-8 fit from Table 4.2 (``FitOptions()``: noise levels estimated when the
+model cannot follow the data). The fit and the reduction are then simulated on two held-out
+recordings (``HELD_OUT``, the same for every training set; simulation fit in percent per
+channel, ``hframe_id.validation``). Also the coverage under mismatch: over noise seeds of one
+plant, how often each 95 % interval holds the across-seed mean estimate.
 
     python -m hframe_id.studies.mismatch --seeds 0 1 2 --noise-seeds 0 1 2 3 4
+    python -m hframe_id.studies.mismatch --train multisine --seeds -1 0 1
 """
 
 from __future__ import annotations
@@ -39,6 +42,21 @@ HELD_OUT = {
     "multisine": MultisineProtocol(3.0, 0.5, 10.0, period_s=2.0, duration_s=2.05, seed=0),
     "5V x step": StepProtocol((-5.0, 5.0), step_s=0.5, duration_s=1.0),
 }
+#: The six steps as protocols (motor 1 / motor 2 volts as in ``STEPS``).
+STEP_PROTOCOLS = tuple(
+    StepProtocol((-float(v), float(v if m == "x" else -v)), step_s=0.5, duration_s=1.0)
+    for v, m in STEPS
+)
+#: Training sets (``--train``): protocols fitted jointly, recorded with sensor seeds
+#: 1000 noise_seed + index (the held-out ones: 10000 + noise_seed). "multisine" adds the
+#: held-out multisine's excitation with other phases (seed 1): the friction regime.
+TRAINING_SETS = {
+    "steps": STEP_PROTOCOLS,
+    "multisine": (
+        *STEP_PROTOCOLS,
+        MultisineProtocol(3.0, 0.5, 10.0, period_s=2.0, duration_s=2.05, seed=1),
+    ),
+}
 
 
 @dataclass
@@ -46,6 +64,7 @@ class MismatchTrial:
     """One fit of one plant."""
 
     seed: int
+    train: str  # the training set, a key of TRAINING_SETS
     success: bool
     message: str
     max_defect: float
@@ -61,15 +80,12 @@ def plant_for(seed: int) -> Plant:
     return shipped_plant("hframe-20") if seed < 0 else realistic_plant("hframe-20", seed)
 
 
-def step_recordings(plant: Plant, noise_seed: int) -> list[Recording]:
-    """The six steps of section 4.4 recorded from ``plant`` (sensor seeds from ``noise_seed``)."""
+def training_recordings(plant: Plant, noise_seed: int, train: str = "steps") -> list[Recording]:
+    """The training set ``train`` (``TRAINING_SETS``) recorded from ``plant`` (sensor seeds
+    1000 ``noise_seed`` + index)."""
     return [
-        record_realistic(
-            plant,
-            StepProtocol((-float(v), float(v if m == "x" else -v)), step_s=0.5, duration_s=1.0),
-            seed=1000 * noise_seed + i,
-        )
-        for i, (v, m) in enumerate(STEPS)
+        record_realistic(plant, protocol, seed=1000 * noise_seed + i)
+        for i, protocol in enumerate(TRAINING_SETS[train])
     ]
 
 
@@ -82,12 +98,15 @@ def simulation_fit(params: ParameterSet, recording: Recording) -> dict[str, floa
     }
 
 
-def run_trial(seed: int, noise_seed: int = 0, options: FitOptions | None = None) -> MismatchTrial:
-    """Fit one realistic plant's steps from Table 4.2 and judge it on the held-out multisine."""
+def run_trial(
+    seed: int, noise_seed: int = 0, options: FitOptions | None = None, train: str = "steps"
+) -> MismatchTrial:
+    """Fit one realistic plant's training set ``train`` from Table 4.2 and judge it on the
+    held-out recordings (``HELD_OUT``)."""
     plant = plant_for(seed)
     start = time.perf_counter()
     result = fit_recordings(
-        step_recordings(plant, noise_seed), load_parameter_file(TABLE_4_2), options
+        training_recordings(plant, noise_seed, train), load_parameter_file(TABLE_4_2), options
     )
     wall = time.perf_counter() - start
     held_out = {
@@ -96,6 +115,7 @@ def run_trial(seed: int, noise_seed: int = 0, options: FitOptions | None = None)
     }
     return MismatchTrial(
         seed=seed,
+        train=train,
         success=result.success,
         message=result.message,
         max_defect=float(result.diagnostics["max_defect"]),
@@ -128,7 +148,7 @@ def _line(t: MismatchTrial) -> str:
         for name, fits in t.held_out_fit.items()
     )
     return (
-        f"seed {t.seed:3d} success={t.success} defect {t.max_defect:.1e} std "
+        f"seed {t.seed:3d} train={t.train} success={t.success} defect {t.max_defect:.1e} std "
         f"time {t.wall_time_s:.1f} s held-out fit (fitted/reduction): {channels}; {t.message}"
     )
 
@@ -139,6 +159,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="*", default=[-1], help="plants (-1 shipped)")
     parser.add_argument(
         "--noise-seeds", type=int, nargs="*", default=[], help="coverage: noise seeds of plant -1"
+    )
+    parser.add_argument(
+        "--train",
+        choices=tuple(TRAINING_SETS),
+        default="steps",
+        help="training set: the six steps, or the steps and a 3 V multisine (phase seed 1)",
     )
     parser.add_argument(
         "--latency",
@@ -153,9 +179,11 @@ def main(argv: list[str] | None = None) -> int:
     }
     options = FitOptions(latency_samples=latency)
     for seed in args.seeds:
-        print(_line(run_trial(seed, options=options)), flush=True)
+        print(_line(run_trial(seed, options=options, train=args.train)), flush=True)
     if args.noise_seeds:
-        trials = [run_trial(-1, noise_seed=s, options=options) for s in args.noise_seeds]
+        trials = [
+            run_trial(-1, noise_seed=s, options=options, train=args.train) for s in args.noise_seeds
+        ]
         for t in trials:
             print(_line(t), flush=True)
         print(f"coverage of the across-seed mean: {coverage_of_mean(trials):.3f}")

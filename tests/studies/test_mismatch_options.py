@@ -1,0 +1,34 @@
+"""The mismatch study's training sets (``--train``), without fitting (a fit takes minutes)."""
+
+import pytest
+
+from hframe_id.studies import mismatch
+from hframe_id.studies.mismatch import HELD_OUT, TRAINING_SETS, plant_for, training_recordings
+
+
+def test_multisine_training_set_is_the_steps_and_a_multisine_of_other_seeds():
+    """Seven recordings: the six steps unchanged, then a multisine whose phase seed and sensor
+    seed differ from the held-out recordings'."""
+    recordings = training_recordings(plant_for(-1), 0, "multisine")
+    assert len(recordings) == 7
+    assert TRAINING_SETS["multisine"][:6] == TRAINING_SETS["steps"]
+    assert [r.experiment["protocol"] for r in recordings] == ["step"] * 6 + ["multisine"]
+    sensor_seeds = [r.rig["seed"] for r in recordings]
+    assert len(set(sensor_seeds)) == 7
+    assert 10_000 not in sensor_seeds  # the held-out recordings' sensor seed (noise seed 0)
+    assert recordings[-1].experiment["protocol.seed"] != HELD_OUT["multisine"].seed
+    assert recordings[-1].experiment["protocol.rms_V"] == HELD_OUT["multisine"].rms_v
+
+
+def test_train_option_reaches_the_trials(monkeypatch, capsys):
+    calls = []
+    monkeypatch.setattr(mismatch, "run_trial", lambda seed, **kw: calls.append((seed, kw)))
+    monkeypatch.setattr(mismatch, "_line", lambda trial: "trial")
+    assert mismatch.main(["--train", "multisine", "--seeds", "-1", "3"]) == 0
+    assert [(seed, kw["train"]) for seed, kw in calls] == [(-1, "multisine"), (3, "multisine")]
+    calls.clear()
+    mismatch.main(["--seeds", "0"])
+    assert calls[0][1]["train"] == "steps"
+    with pytest.raises(SystemExit):
+        mismatch.main(["--train", "pulses"])
+    assert "invalid choice" in capsys.readouterr().err
