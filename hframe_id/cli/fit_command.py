@@ -8,11 +8,13 @@ import json
 import sys
 import time
 import warnings
+from contextlib import nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import FitError, OptionError
+from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.options import (
     CONTINUITY,
     NOISE_METHODS,
@@ -412,10 +414,11 @@ def _write_outputs(
     initial_path: Path,
     out_dir: Path,
     cross_validation: LeaveOneOutTable | None,
-    plots: bool = True,
+    drawer: InlineDrawer | ProcessDrawer | None = None,
 ) -> tuple[str, Path | None, Path]:
-    """The parameter file (a successful fit only) and the report with its plots: all of them
-    or, on any exception, none (nor ``out_dir`` if this created it)."""
+    """The parameter file (a successful fit only) and the report with its plots drawn by
+    ``drawer`` (None: no plots): all of them or, on any exception, none (nor ``out_dir`` if
+    this created it)."""
     from hframe_id.fitting.output import write_parameter_file
     from hframe_id.fitting.report import write_report
 
@@ -430,7 +433,14 @@ def _write_outputs(
             result, recordings, paths, initial_path, out_dir
         )
         report = write_report(
-            result, recordings, fit_id, parameter_file, out_dir, cross_validation, plots
+            result,
+            recordings,
+            fit_id,
+            parameter_file,
+            out_dir,
+            cross_validation,
+            plots=drawer is not None,
+            drawer=drawer,
         )
     except BaseException:
         if parameter_file is not None:
@@ -441,18 +451,11 @@ def _write_outputs(
     return fit_id, parameter_file, report
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run ``hframe-id fit``: fit, cross-validate, write the parameter file and the report.
-
-    Exit status 0 on success, 1 if the fit failed (then no parameter file is written).
-    """
-    from hframe_id.fitting import fit_recordings
-    from hframe_id.fitting.report import incomplete_recordings
-    from hframe_id.fitting.summary_json import fit_summary
+def _inputs(args: argparse.Namespace, options: FitOptions):
+    """The recordings (``paths``, ``recordings``), the start (``initial``, ``initial_path``),
+    the fitted ``variant`` and the options with the model's defaults, read and checked."""
     from hframe_id.recordings import read_recording
 
-    options = _options(args)
-    out_dir = check_dir(args.out_dir, "--out-dir")
     model = args.model or (args.loaded_models[0] if len(args.loaded_models) == 1 else None)
     if model:
         # A start of another variant fails before the recordings are read.
@@ -469,20 +472,41 @@ def run(args: argparse.Namespace) -> int:
     if not model:
         initial, initial_path = _initial(args, variant)
     options = _with_model_defaults(options, args, variant)
-    if not args.quiet:
-        total = sum(rec.n_samples for rec in recordings)
-        print(
-            f"fitting {variant} to {len(recordings)} recording(s), {total} samples, "
-            f"starting from {initial_path}",
-            file=sys.stderr,
+    return paths, recordings, initial, initial_path, variant, options
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``hframe-id fit``: fit, cross-validate, write the parameter file and the report.
+
+    Exit status 0 on success, 1 if the fit failed (then no parameter file is written).
+    """
+    options = _options(args)
+    out_dir = check_dir(args.out_dir, "--out-dir")
+    # The figure worker starts first: it imports matplotlib while this process reads the
+    # inputs and imports the fitter (both single-threaded; the solve uses every core).
+    from hframe_id.fitting.report_figures import import_matplotlib
+
+    with nullcontext() if args.no_plots else ProcessDrawer(import_matplotlib) as drawer:
+        paths, recordings, initial, initial_path, variant, options = _inputs(args, options)
+        if not args.quiet:
+            total = sum(rec.n_samples for rec in recordings)
+            print(
+                f"fitting {variant} to {len(recordings)} recording(s), {total} samples, "
+                f"starting from {initial_path}",
+                file=sys.stderr,
+            )
+        from hframe_id.fitting import fit_recordings
+
+        result = fit_recordings(recordings, initial, options)
+        cross_validation = None
+        if result.success and len(recordings) > 1 and not args.no_cross_validation:
+            cross_validation = _cross_validate(recordings, initial, options, args.quiet)
+        fit_id, parameter_file, report = _write_outputs(
+            result, recordings, paths, initial_path, out_dir, cross_validation, drawer
         )
-    result = fit_recordings(recordings, initial, options)
-    cross_validation = None
-    if result.success and len(recordings) > 1 and not args.no_cross_validation:
-        cross_validation = _cross_validate(recordings, initial, options, args.quiet)
-    fit_id, parameter_file, report = _write_outputs(
-        result, recordings, paths, initial_path, out_dir, cross_validation, not args.no_plots
-    )
+    from hframe_id.fitting.report import incomplete_recordings
+    from hframe_id.fitting.summary_json import fit_summary
+
     human = sys.stderr if args.json else sys.stdout
     print(result.summary(), file=human)
     for line in incomplete_recordings(recordings):

@@ -37,7 +37,6 @@ import numpy as np
 
 from hframe_id.errors import FitError
 from hframe_id.fitting.consider import consider_covariance
-from hframe_id.fitting.design_advice import identifying_designs
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
 from hframe_id.fitting.options import (
@@ -922,6 +921,9 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         )
     not_identified = tuple(n for n in problem.free_names if n in held)
     if not_identified:
+        # Imported here: the standard designs read the shipped datasets' protocols (0.15 s).
+        from hframe_id.fitting.design_advice import identifying_designs
+
         advice = identifying_designs(problem, ms, gn, state, stats, not_identified)
         for name, designs in advice.items():
             estimates[name] = replace(estimates[name], identified_by=designs)

@@ -9,8 +9,9 @@ leave-one-recording-out cross-validation; measured vs simulated signals (fitted 
 parameters) and residuals for every experiment; the correlation matrix (values in the cells)
 with a sentence per group of strongly correlated parameters.
 
-Figures are ``matplotlib.figure.Figure`` objects drawn by the Agg canvas (matplotlib imported
-inside the plotting functions): importing this module sets no backend and no global state.
+The figures (``report_figures``: matplotlib imported inside the plotting functions, so
+importing this module sets no backend and no global state) are drawn here or, given a
+``ProcessDrawer``, in worker processes while the report is written.
 Plots are drawn into a hidden temporary folder that is renamed into place at the end, so a
 failure leaves neither plots nor report behind; ``plots=False`` writes the report alone.
 """
@@ -18,13 +19,21 @@ failure leaves neither plots nor report behind; ``plots=False`` writes the repor
 from __future__ import annotations
 
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hframe_id.atomic import replace_atomically, staged_directory
+from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.problem import applied_inputs
+from hframe_id.fitting.report_figures import (
+    SCALE,
+    ExperimentSignals,
+    plot_correlation,
+    plot_experiment,
+)
 from hframe_id.models import build_model, declaration
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.parameters.reduce import reduce_to_hframe8
@@ -32,9 +41,20 @@ from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import simulate
 from hframe_id.validation.cross_validation import LeaveOneOutTable
 
-#: Display scale per output unit: angles in rad, positions in mm.
-_SCALE = {"rad": (1.0, "rad"), "m": (1e3, "mm")}
-_RESIDUAL_SCALE = {"rad": (1e6, "urad"), "m": (1e6, "um")}
+
+@dataclass(frozen=True)
+class Figures:
+    """Where the report's figures go: drawn by ``drawer`` into ``folder``, linked from the
+    report as ``link``/name."""
+
+    folder: Path
+    link: str
+    drawer: InlineDrawer | ProcessDrawer
+
+    def add(self, caption: str, name: str, function, *args) -> list[str]:
+        """Have ``function(*args, folder / name)`` drawn; the report's lines linking it."""
+        self.drawer.draw(function, *args, self.folder / name)
+        return [f"![{caption}]({self.link}/{name})", ""]
 
 
 def model_reference(variant: str) -> tuple[ParameterSet | None, str]:
@@ -129,7 +149,7 @@ def mismatch_rows(result: FitResult) -> list[tuple[str, ...]]:
         )
     ]
     for name, channel in result.diagnostics["noise"]["channels"].items():
-        scale, unit = _SCALE[units[name]]
+        scale, unit = SCALE[units[name]]
         rows.append(
             (
                 name,
@@ -217,74 +237,6 @@ def simulated_outputs(params: ParameterSet, rec: Recording, x0: np.ndarray) -> n
     return np.array(model.output.map(states.shape[0])(states.T)).T
 
 
-def _figure(size: tuple[float, float], margins: tuple[float, float, float, float]):
-    """A figure on the Agg canvas (no pyplot, no backend switch) with fixed ``margins``
-    (left, right, bottom, top) [in]: a layout engine would draw every figure twice."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    width, height = size
-    left, right, bottom, top = margins
-    figure = Figure(figsize=size)
-    figure.subplots_adjust(
-        left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height
-    )
-    FigureCanvasAgg(figure)
-    return figure
-
-
-def plot_experiment(
-    rec: Recording,
-    fitted: np.ndarray,
-    thesis: np.ndarray | None,
-    label: str,
-    units: dict[str, str],
-    path: Path,
-) -> None:
-    """Measured, fitted and thesis outputs of one recording, and the fit's residuals."""
-    n = len(rec.output_names)
-    fig = _figure((4.2 * n, 6), (0.9, 0.15, 0.5, 0.6))
-    fig.subplots_adjust(wspace=0.45, hspace=0.15)
-    axes = fig.subplots(2, n, sharex=True, squeeze=False)
-    t = rec.time_s
-    for j, name in enumerate(rec.output_names):
-        scale, unit = _SCALE[units[name]]
-        rscale, runit = _RESIDUAL_SCALE[units[name]]
-        measured = np.where(rec.valid[:, j], rec.outputs[:, j], np.nan)
-        ax = axes[0, j]
-        ax.plot(t, scale * measured, "k.", ms=1.5, label="measured (valid)")
-        ax.plot(t, scale * fitted[:, j], "C0", lw=1.2, label="fitted")
-        if thesis is not None:
-            ax.plot(t, scale * thesis[:, j], "C3--", lw=1, label=f"reference: {label}")
-        ax.set_title(f"{name} [{unit}]")
-        ax.grid(alpha=0.3)
-        res = axes[1, j]
-        res.plot(t, rscale * (measured - fitted[:, j]), "C0", lw=0.8)
-        res.set_ylabel(f"measured - fitted [{runit}]")
-        res.set_xlabel("time [s]")
-        res.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle(rec.name())
-    fig.savefig(path, dpi=90)
-
-
-def plot_correlation(result: FitResult, path: Path) -> None:
-    """The free parameters' correlation matrix as a heat map with the values in the cells."""
-    names = list(result.free_names)
-    size = 0.6 * len(names)
-    fig = _figure((size + 2.5, size + 1.5), (1.2, 0.3, 1.2, 0.4))
-    ax = fig.subplots()
-    image = ax.imshow(result.correlation, cmap="RdBu_r", vmin=-1, vmax=1)
-    for (i, j), r in np.ndenumerate(result.correlation):
-        colour = "white" if abs(r) > 0.6 else "black"
-        ax.text(j, i, f"{r:.2f}", ha="center", va="center", fontsize=7, color=colour)
-    ax.set_xticks(range(len(names)), names, rotation=90, fontsize=8)
-    ax.set_yticks(range(len(names)), names, fontsize=8)
-    fig.colorbar(image, ax=ax, shrink=0.8, label="correlation")
-    ax.set_title("Correlation of the free parameters")
-    fig.savefig(path, dpi=90)
-
-
 #: |correlation| from which the report calls two free parameters strongly correlated: their
 #: estimates move together, and the data fix a combination better than each one.
 STRONG_CORRELATION = 0.9
@@ -346,11 +298,12 @@ def correlation_lines(result: FitResult) -> list[str]:
     return lines
 
 
-def _correlation_lines(result: FitResult, plots: Path | None, folder: str) -> list[str]:
+def _correlation_lines(result: FitResult, figures: Figures | None) -> list[str]:
     lines = ["## Correlation", ""]
-    if plots is not None:
-        plot_correlation(result, plots / "correlation.png")
-        lines += [f"![correlation]({folder}/correlation.png)", ""]
+    if figures is not None:
+        matrix = np.asarray(result.correlation)
+        names = tuple(result.free_names)
+        lines += figures.add("correlation", "correlation.png", plot_correlation, matrix, names)
     return [*lines, *correlation_lines(result), ""]
 
 
@@ -457,11 +410,9 @@ def _signal_lines(
     recordings: list[Recording],
     thesis: ParameterSet | None,
     label: str,
-    plots: Path | None,
-    folder: str,
+    figures: Figures | None,
 ) -> list[str]:
-    """Per experiment: plot (drawn into ``plots``, linked as ``folder``; None: no plot) and
-    rms residuals."""
+    """Per experiment: rms residuals and a figure (None: no figures)."""
     units = output_units(result.variant)
     lines = ["## Measured and simulated signals", ""]
     x0s = result.initial_states
@@ -469,18 +420,25 @@ def _signal_lines(
         x0 = x0s[i] if x0s is not None else None
         fitted = simulated_outputs(result.parameters, rec, x0)
         reference = simulated_outputs(thesis, rec, x0) if thesis else None
-        png = f"{Path(rec.name()).stem}.png"
-        if plots is not None:
-            plot_experiment(rec, fitted, reference, label, units, plots / png)
         rms = []
         for j, name in enumerate(rec.output_names):
             valid = rec.valid[:, j]
-            scale, unit = _SCALE[units[name]]
+            scale, unit = SCALE[units[name]]
             value = np.sqrt(np.mean((rec.outputs[valid, j] - fitted[valid, j]) ** 2))
             rms.append(f"{name} {scale * value:.3g} {unit}")
         lines += [f"### {rec.name()}", "", f"RMS residual: {', '.join(rms)}", ""]
-        if plots is not None:
-            lines += [f"![{rec.name()}]({folder}/{png})", ""]
+        if figures is not None:
+            signals = ExperimentSignals(
+                time_s=rec.time_s,
+                names=tuple(rec.output_names),
+                units=tuple(units[name] for name in rec.output_names),
+                measured=np.where(rec.valid, rec.outputs, np.nan),
+                fitted=fitted,
+                reference=reference,
+                title=rec.name(),
+            )
+            png = f"{Path(rec.name()).stem}.png"
+            lines += figures.add(rec.name(), png, plot_experiment, signals, label)
     return lines
 
 
@@ -490,9 +448,10 @@ def _report_lines(
     fit_id: str,
     parameter_file: Path | None,
     cross_validation: LeaveOneOutTable | None,
-    plots: Path | None,
-    folder: str,
+    figures: Figures | None,
 ) -> list[str]:
+    # The correlation map first: it needs no simulation, so a worker draws it meanwhile.
+    correlation = _correlation_lines(result, figures) if len(result.free_names) > 1 else []
     thesis, label = model_reference(result.variant)
     truth, truth_label, truth_note = comparable_truth(recordings, result.variant)
     lines = [f"# Fit {fit_id}", "", *_status_lines(result, recordings, parameter_file)]
@@ -518,10 +477,8 @@ def _report_lines(
     ]
     if cross_validation is not None:
         lines += _cross_validation_lines(result, cross_validation)
-    lines += _signal_lines(result, recordings, thesis, label, plots, folder)
-    if len(result.free_names) > 1:
-        lines += _correlation_lines(result, plots, folder)
-    return lines
+    lines += _signal_lines(result, recordings, thesis, label, figures)
+    return lines + correlation
 
 
 def write_report(
@@ -532,6 +489,7 @@ def write_report(
     out_dir: Path,
     cross_validation: LeaveOneOutTable | None = None,
     plots: bool = True,
+    drawer: InlineDrawer | ProcessDrawer | None = None,
 ) -> Path:
     """Write ``<out_dir>/<fit id>-report.md`` and its plots in ``<fit id>-plots/``.
 
@@ -544,6 +502,7 @@ def write_report(
     out_dir : an existing folder.
     cross_validation : the leave-one-recording-out table, if computed.
     plots : draw the plots (False: the report alone, without figures).
+    drawer : where the figures are drawn (default: here, one after the other).
 
     Returns
     -------
@@ -551,15 +510,20 @@ def write_report(
     ``<fit id>-plots`` once all are drawn; on any exception neither plots nor report is left.
     """
     if not plots:
-        lines = _report_lines(
-            result, recordings, fit_id, parameter_file, cross_validation, None, ""
-        )
+        lines = _report_lines(result, recordings, fit_id, parameter_file, cross_validation, None)
         return replace_atomically(out_dir / f"{fit_id}-report.md", "\n".join(lines) + "\n")
     plot_dir = out_dir / f"{fit_id}-plots"
+    drawer = drawer or InlineDrawer()
     with staged_directory(plot_dir) as staging:
-        lines = _report_lines(
-            result, recordings, fit_id, parameter_file, cross_validation, staging, plot_dir.name
-        )
+        figures = Figures(staging, plot_dir.name, drawer)
+        try:
+            lines = _report_lines(
+                result, recordings, fit_id, parameter_file, cross_validation, figures
+            )
+        except BaseException:
+            drawer.discard()
+            raise
+        drawer.finish()
     try:
         return replace_atomically(out_dir / f"{fit_id}-report.md", "\n".join(lines) + "\n")
     except BaseException:

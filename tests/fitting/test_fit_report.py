@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from hframe_id.figure_drawers import InlineDrawer
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting import report as report_module
 from hframe_id.fitting.output import noise_levels
@@ -112,16 +113,17 @@ def test_a_crash_while_writing_leaves_no_files(mismatched, tmp_path, monkeypatch
 
     monkeypatch.setattr(report_module, plot, broken)
     result, recordings = mismatched
+    initial = MODELS / "hframe-8-table4.2.yaml"
     data = tmp_path / "h20_xmotion.mcap"
     data.write_bytes(b"stands in for the recording (hashed for the fit id)")
     out = tmp_path / "fits"
     with pytest.raises(RuntimeError, match="disk on fire"):
-        _write_outputs(result, recordings, [data], MODELS / "hframe-8-table4.2.yaml", out, None)
+        _write_outputs(result, recordings, [data], initial, out, None, InlineDrawer())
     # the parameter file written before the report is removed again, and the folder made for it
     assert not out.exists()
     out.mkdir()
     with pytest.raises(RuntimeError, match="disk on fire"):
-        _write_outputs(result, recordings, [data], MODELS / "hframe-8-table4.2.yaml", out, None)
+        _write_outputs(result, recordings, [data], initial, out, None, InlineDrawer())
     assert out.is_dir() and not list(out.iterdir())
 
 
