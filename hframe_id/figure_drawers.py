@@ -1,17 +1,18 @@
-"""Where report figures are drawn: here, in order (``InlineDrawer``), or in a worker process
+"""Where report figures are drawn: here, in order (``InlineDrawer``), or in worker processes
 started before the work whose results they show (``ProcessDrawer``).
 
-Drawing the shipped 4 V fit's figures costs about half as much as its 1.2 s solve: importing
+Drawing the shipped 4 V fit's figures costs about as much as its 1.2 s solve: importing
 matplotlib 0.47 s, the correlation map 0.29 s, the experiment's figure 0.28 s (this machine,
 quiet). A worker started with the command imports matplotlib while this process reads the
-inputs and imports the fitter (both single-threaded), then waits without using the CPU while
-the fit solves on every core, and draws the figures while the report is written. ``finish``
-waits for every figure and raises the first failure, so the caller can drop a half-drawn
-plots folder.
+inputs and imports the fitter (both single-threaded), forks a copy of itself, and both wait
+without using the CPU while the fit solves on every core; then they draw the figures side by
+side while the report is written. ``finish`` waits for every figure and raises the first
+failure, so the caller can drop a half-drawn plots folder.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 from collections.abc import Callable
@@ -44,14 +45,29 @@ class InlineDrawer:
         """Nothing is pending."""
 
 
-def _serve(connection, prepare: Callable[[], None] | None) -> None:
-    """The worker: ``prepare()`` (imports, a first figure), then draw each ``(function,
-    args)`` received and answer None or the exception, until None arrives or the command's
-    end of the pipe closes."""
+def _serve(connections: list, prepare: Callable[[], None] | None) -> None:
+    """The worker: ``prepare()`` (imports), then one copy per connection (the others forked
+    with the imports done), each drawing the ``(function, args)`` it receives and answering
+    None or the exception, until None arrives or the command's end of its pipe closes."""
     os.nice(WORKER_NICENESS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the command handles Ctrl-C and stops it
     if prepare is not None:
         prepare()
+    mine, forked = connections[0], False
+    for connection in connections[1:]:
+        if os.fork() == 0:
+            mine, forked = connection, True
+            break
+    for connection in connections:
+        if connection is not mine:
+            connection.close()
+    _answer(mine)
+    if forked:
+        os._exit(0)  # a forked copy leaves without the spawned process's exit handlers
+
+
+def _answer(connection) -> None:
+    """Draw each task received on ``connection`` until None or the end of the pipe."""
     while True:
         try:
             task = connection.recv()
@@ -69,71 +85,77 @@ def _serve(connection, prepare: Callable[[], None] | None) -> None:
 
 
 class FigureWorkerError(RuntimeError):
-    """The figure worker process ended before drawing every figure."""
+    """A figure worker process ended before drawing every figure."""
 
 
 class ProcessDrawer:
-    """Draws figures in one spawned worker process; use as a context manager (leaving it
-    with an exception stops the worker at once).
+    """Draws figures in worker processes: one spawned, which imports matplotlib, and copies
+    of it forked after the import (where the system can fork); a context manager.
 
     The functions and their arguments are pickled: module-level functions of plain data
     (``hframe_id.fitting.report_figures``).
     """
 
-    def __init__(self, prepare: Callable[[], None] | None = None) -> None:
-        """Start the worker; it calls ``prepare()`` first (e.g. imports matplotlib and draws a
-        first figure, so that the first real one does not pay for it)."""
+    def __init__(self, prepare: Callable[[], None] | None = None, workers: int = 2) -> None:
+        """Start the workers; they call ``prepare()`` first (e.g. import matplotlib)."""
         import multiprocessing
 
         context = multiprocessing.get_context("spawn")
-        self._connection, child = context.Pipe()
-        self._process = context.Process(
-            target=_serve, args=(child, prepare), name="hframe-id figures", daemon=True
+        copies = workers if hasattr(os, "fork") else 1
+        pipes = [context.Pipe() for _ in range(copies)]
+        process = context.Process(
+            target=_serve,
+            args=([child for _, child in pipes], prepare),
+            name="hframe-id figures",
+            daemon=True,
         )
-        self._process.start()
-        child.close()  # the worker's end: only the worker holds it now
-        self._pending = 0
+        process.start()
+        for _, child in pipes:
+            child.close()  # the workers' ends: only the workers hold them now
+        self._connections = [connection for connection, _ in pipes]
+        self._pending = [0] * copies
 
     def draw(self, function: Callable[..., None], *args: Any) -> None:
-        """Queue ``function(*args)`` on the worker."""
-        self._connection.send((function, args))
-        self._pending += 1
+        """Queue ``function(*args)`` on the worker with the fewest figures queued."""
+        index = self._pending.index(min(self._pending))
+        self._connections[index].send((function, args))
+        self._pending[index] += 1
+
+    def _collect(self) -> list[BaseException]:
+        """Wait for the answer to every queued figure: the failures."""
+        failures: list[BaseException] = []
+        for index, connection in enumerate(self._connections):
+            pending, self._pending[index] = self._pending[index], 0
+            for _ in range(pending):
+                try:
+                    answer = connection.recv()
+                except EOFError:
+                    failures.append(
+                        FigureWorkerError("a figure worker ended before drawing its figures")
+                    )
+                    break
+                if answer is not None:
+                    failures.append(answer)
+        return failures
 
     def finish(self) -> None:
         """Wait for every queued figure, then raise the first failure: when this returns or
-        raises, the worker draws nothing more."""
-        from multiprocessing.connection import wait
-
-        pending, self._pending = self._pending, 0
-        failures = []
-        for _ in range(pending):
-            wait([self._connection, self._process.sentinel])
-            if not self._connection.poll():
-                raise FigureWorkerError(
-                    f"the figure worker ended (exit code {self._process.exitcode}) before "
-                    "drawing every figure"
-                )
-            if (answer := self._connection.recv()) is not None:
-                failures.append(answer)
-        if failures:
+        raises, no worker draws any more."""
+        if failures := self._collect():
             raise failures[0]
 
     def discard(self) -> None:
-        """Stop the worker, drawing or not (the caller is failing already and removes what it
-        drew)."""
-        self._pending = 0
-        self._process.terminate()
-        self._process.join()
-        self._connection.close()
+        """Wait for the figures being drawn, ignoring how they ended (the caller is failing
+        already and removes what they drew)."""
+        self._collect()
 
     def __enter__(self) -> ProcessDrawer:
         return self
 
     def __exit__(self, kind: object, *exc: object) -> None:
-        if self._connection.closed:  # discarded
-            return
-        if kind is not None or self._pending:
-            self.discard()
-            return
-        self._connection.send(None)  # the worker exits by itself; nothing waits for it
-        self._connection.close()
+        self.discard()
+        for connection in self._connections:
+            if kind is None:
+                with contextlib.suppress(OSError):  # a worker that ended has no pipe
+                    connection.send(None)  # the workers exit by themselves; nothing waits
+            connection.close()

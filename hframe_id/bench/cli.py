@@ -2,8 +2,9 @@
 processes, against a baseline timed in the same run that first imports what every command
 needs (what the command line did before its imports were made lazy: 2.4-3.9 s for
 ``--help`` and 2.5-2.7 s for ``fit --help`` on the shared 2-core machine). Then one fit of
-4V_xmotion.mcap: its wall time against the solver's own time (the rest is start-up,
-reading, report and plots).
+4V_xmotion.mcap: its wall time against the solver's own time in the same process (the rest
+is start-up, reading, report and plots; issue 12's target: at most 2), median ratio of
+``REPEATS`` runs with and without plots, interleaved.
 """
 
 from __future__ import annotations
@@ -71,10 +72,16 @@ def run() -> None:
         lazy, eager = _wall(argv), _wall(argv, eager=True)
         label = "hframe-id " + " ".join(argv[:2])
         print(f"{label:<32} {lazy:>9.2f} {eager:>10.2f} {lazy / eager:>7.2f}", flush=True)
-    for extra in ([], ["--no-plots"]):
-        wall, solver = _fit(extra)
+    variants = ([], ["--no-plots"])
+    runs = [[_fit(extra) for extra in variants] for _ in range(REPEATS)]
+    print(f"fit, median of {REPEATS} interleaved runs: wall time / the solver's time")
+    for k, extra in enumerate(variants):
+        ratios = sorted(wall / solver for wall, solver in (run[k] for run in runs))
+        walls = sorted(run[k][0] for run in runs)
+        solvers = sorted(run[k][1] for run in runs)
         label = " ".join(["fit 4V_xmotion.mcap", *extra])
         print(
-            f"{label}: {wall:.1f} s wall, solver {solver:.1f} s, ratio {wall / solver:.1f}",
+            f"{label}: {walls[REPEATS // 2]:.2f} s wall, solver {solvers[REPEATS // 2]:.2f} s, "
+            f"ratio {ratios[REPEATS // 2]:.2f} (range {ratios[0]:.2f}-{ratios[-1]:.2f})",
             flush=True,
         )

@@ -19,6 +19,9 @@ SCALE = {"rad": (1.0, "rad"), "m": (1e3, "mm")}
 RESIDUAL_SCALE = {"rad": (1e6, "urad"), "m": (1e6, "um")}
 #: Resolution of the report's PNGs [dots per inch].
 DPI = 90
+#: zlib level of the PNGs: 1 encodes the shipped fit's experiment figure in 25 ms instead of
+#: 44 ms (level 6, the default), for a file 17 % larger.
+PNG_OPTIONS = {"compress_level": 1}
 
 
 @dataclass(frozen=True)
@@ -94,7 +97,7 @@ def plot_experiment(signals: ExperimentSignals, label: str, path: Path) -> None:
         ax.locator_params(nbins=4)  # a tick costs ~1 ms to draw; 4 bins read as well
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(signals.title)
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, pil_kwargs=PNG_OPTIONS)
 
 
 def plot_correlation(correlation: np.ndarray, names: tuple[str, ...], path: Path) -> None:
@@ -116,4 +119,4 @@ def plot_correlation(correlation: np.ndarray, names: tuple[str, ...], path: Path
         ax.spines[side].set_visible(False)
     fig.colorbar(image, ax=ax, shrink=0.8, label="correlation")
     ax.set_title("Correlation of the free parameters")
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, pil_kwargs=PNG_OPTIONS)
