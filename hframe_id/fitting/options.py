@@ -23,6 +23,7 @@ UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
 SOLVERS = ("gauss-newton", "ipopt")
 CONTINUITY = ("exact", "none")
+CONSIDER_METHODS = ("linear", "refit")
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,7 @@ class StatisticsOptions:
     uncertainty: str
     confidence: float
     consider: Mapping[str, float] | None
+    consider_method: str
     identifiability_threshold: float
 
 
@@ -129,6 +131,10 @@ class FitOptions:
         include (consider covariance, ``hframe_id.fitting.consider``). ``None`` (default):
         the declaration's ``held`` table values and any parameter held for
         identifiability, each at ``HELD_PRIOR_RELATIVE_STD``; ``{}``: held values exact.
+    consider_method : how the held priors enter: ``"linear"`` (the consider covariance
+        linearised at the optimum) or ``"refit"`` (two warm-started refits per held
+        parameter, at exp(+/-sigma) times its value: the secant, for effects that are not
+        linear).
     solver : the solver of the all-window stages: ``"gauss-newton"`` (default: the condensed
         Gauss-Newton of ``hframe_id.fitting.solver``) or ``"ipopt"`` (CasADi ``nlpsol`` with
         an exact Gauss-Newton Hessian on the same transcription, ``hframe_id.fitting.nlp``;
@@ -197,6 +203,7 @@ class FitOptions:
     noise: str = "auto"
     latency_samples: Mapping[str, int] = field(default_factory=dict)
     consider: Mapping[str, float] | None = None
+    consider_method: str = "linear"
     shooting_interval: int = 10
     continuity: str = "exact"
     smoothing: tuple[float, float] | None = None
@@ -305,6 +312,11 @@ class FitOptions:
                 )
             for name, value in self.consider.items():
                 _positive(f"consider[{name!r}]", value)
+        if self.consider_method not in CONSIDER_METHODS:
+            raise OptionError(
+                f"consider_method must be one of {', '.join(CONSIDER_METHODS)}, "
+                f"got {self.consider_method!r}"
+            )
         if self.solver not in SOLVERS:
             raise OptionError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         if self.continuity not in CONTINUITY:
@@ -363,6 +375,7 @@ class FitOptions:
             "noise": self.noise,
             "latency_samples": {k: int(v) for k, v in self.latency_samples.items()},
             "consider": "default" if self.consider is None else dict(self.consider),
+            "consider_method": self.consider_method,
             "shooting_interval_samples": int(self.shooting_interval),
             "continuity": self.continuity,
             "smoothing": list(self.smoothing) if self.smoothing else "model default",

@@ -114,6 +114,13 @@ class FitProblem:
         )
         return p
 
+    def theta_of(self, params: ParameterSet) -> np.ndarray:
+        """(n_f,) theta of the free parameters' values in ``params`` (the inverse of
+        ``parameters``)."""
+        p = np.array([params.values[n] for n in self.model.parameter_names])[list(self.free)]
+        start = self.p_initial[list(self.free)]
+        return np.where(self.signed, (p - start) / self.signed_scale, np.log(np.abs(p / start)))
+
     def parameter_slopes(self, p: np.ndarray) -> np.ndarray:
         """(n_f,) d p / d theta of the free parameters at all parameters ``p`` (SI, model
         order): p itself for log scale, s for signed ones."""

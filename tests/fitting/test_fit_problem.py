@@ -53,6 +53,7 @@ def test_default_free_set_is_the_issues(hframe):
         ({"confidence": 95}, "confidence must be in (0, 1)"),
         ({"channel_std": {"phi1": -1.0}}, "channel_std['phi1'] must be > 0"),
         ({"max_iterations": 0}, "max_iterations must be > 0"),
+        ({"consider_method": "exact"}, "consider_method must be one of linear, refit"),
     ],
 )
 def test_options_validate_with_actionable_messages(kwargs, message):
@@ -66,6 +67,28 @@ def test_unknown_free_parameter_suggests_the_nearest(hframe, recording):
         build_problem([recording], hframe, FitOptions(free=("k_q",)))
     with pytest.raises(FitError, match="J_m1.*did you mean 'J_M1'"):
         build_problem([recording], hframe, FitOptions(fix=("J_m1",)))
+
+
+def test_theta_of_inverts_parameters(hframe, recording):
+    """theta -> parameters -> theta is the identity (log scale and signed alike), to rounding."""
+    problem = build_problem([recording], hframe, FitOptions(free=("k_l", "B_M1", "g_2")))
+    theta = np.array([0.3, -1.2, 0.05])
+    values = dict(zip(problem.model.parameter_names, problem.parameters(theta), strict=True))
+    assert np.allclose(problem.theta_of(hframe.replace_values(**values)), theta, atol=1e-12)
+
+
+def test_at_a_bound_means_within_a_tenth_of_a_standard_error():
+    from hframe_id.fitting.fit import is_at_bound
+
+    lower, upper = math.log(0.1), math.log(10.0)
+    assert is_at_bound(lower, lower, upper, 1e-6)  # on it
+    # 2e-4 short of it, undetermined (relative std 5): the bound, not the data, fixes it
+    # (the mismatch fits that were reported converged with B_M1 there)
+    assert is_at_bound(lower + 2e-4, lower, upper, 5.0)
+    assert is_at_bound(upper - 0.05, lower, upper, 1.0)
+    # the same distance with a well-determined estimate (std 1e-5) is an interior optimum
+    assert not is_at_bound(lower + 2e-4, lower, upper, 1e-5)
+    assert not is_at_bound(0.0, lower, upper, 5.0)
 
 
 def test_patterns_select_parameters(hframe, recording):
