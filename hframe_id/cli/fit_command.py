@@ -16,6 +16,7 @@ from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import FitError, OptionError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.options import (
+    CONSIDER_METHODS,
     CONTINUITY,
     NOISE_METHODS,
     SOLVERS,
@@ -248,6 +249,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="how standard errors are computed",
     )
     parser.add_argument(
+        "--consider-method",
+        choices=CONSIDER_METHODS,
+        default=FitOptions.consider_method,
+        help="how the held parameters' prior uncertainty (+/-20 %%) widens the intervals: "
+        "'linear' at the optimum, or 'refit' (the fit repeated twice per held parameter, at "
+        "its value x exp(+/-0.2): slower, for effects that are not linear)",
+    )
+    parser.add_argument(
         "--threads",
         type=int,
         default=None,
@@ -335,6 +344,7 @@ def _options(args: argparse.Namespace) -> FitOptions:
         identifiability_threshold=args.identifiability_threshold,
         max_misfit=args.max_misfit,
         uncertainty=args.uncertainty,
+        consider_method=args.consider_method,
         verbose=0 if args.quiet else 1,
         **extra,
     )
