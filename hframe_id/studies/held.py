@@ -1,9 +1,11 @@
 """Held-parameter study: one-axis fits with the unmeasured idler held at Table 2.3 on fresh
 plants whose idler (J_2, B_2, tau_c2) differs from the table by 10-20 %, and how often the
 95 % intervals hold the truth, with the held values' prior uncertainty in the intervals
-(consider covariance, the default) and without it (``consider={}``).
+(consider covariance, the default: linear at the optimum, or from refits with
+``--consider-method refit``) and without it (``consider={}``).
 
     python -m hframe_id.studies.held --seeds 0 1 2 3 4 5 6 7 8 9
+    python -m hframe_id.studies.held --consider-method refit --seeds 0 1 2 3 4 5 6 7 8 9
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import sys
 import numpy as np
 
 from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.options import CONSIDER_METHODS
 from hframe_id.models import declaration
 from hframe_id.parameters import load_parameter_file
 from hframe_id.studies.recovery import random_truth, simulate_set
@@ -25,7 +28,9 @@ TRUTH_SPREAD = 1.1
 IDLER_OFFSET = (0.10, 0.20)
 
 
-def run_trial(seed: int, consider: dict | None = None) -> tuple[bool, dict[str, bool], str]:
+def run_trial(
+    seed: int, consider: dict | None = None, consider_method: str = "linear"
+) -> tuple[bool, dict[str, bool], str]:
     """(success, {parameter: interval holds the truth}, message) of one fresh plant."""
     rng = np.random.default_rng(seed)
     truth = random_truth("one-axis", rng, TRUTH_SPREAD)
@@ -35,7 +40,11 @@ def run_trial(seed: int, consider: dict | None = None) -> tuple[bool, dict[str, 
     }
     truth = truth.replace_values(**idler)
     table = load_parameter_file(declaration("one-axis").reference_file, "one-axis")
-    result = fit_recordings(simulate_set(truth, seed), table, FitOptions(consider=consider))
+    result = fit_recordings(
+        simulate_set(truth, seed),
+        table,
+        FitOptions(consider=consider, consider_method=consider_method),
+    )
     covered = {
         n: e.ci95[0] <= truth.values[n] <= e.ci95[1]
         for n, e in result.estimates.items()
@@ -48,11 +57,12 @@ def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
+    parser.add_argument("--consider-method", choices=CONSIDER_METHODS, default="linear")
     args = parser.parse_args(argv)
     for label, consider in (("held values with +/-20 % prior", None), ("held exact", {})):
         hits = []
         for seed in args.seeds:
-            success, covered, message = run_trial(seed, consider)
+            success, covered, message = run_trial(seed, consider, args.consider_method)
             missed = [n for n, ok in covered.items() if not ok]
             hits += list(covered.values())
             print(f"{label}: seed {seed} success={success} missed {missed} ({message[:60]})")
