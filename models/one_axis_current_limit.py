@@ -1,0 +1,82 @@
+"""The one-axis belt drive (Ch. 2) with its amplifier's current limit: a user model.
+
+The thesis's motor torque (eq. 2.4) is K_t (g_1 u - K_e phidot_1) / R: the amplifier follows
+its command at any current. A servo amplifier limits its current instead; the realistic sim
+rig does (docs/realistic-rig.md, (A1)-(A2): 8 A, reached by the 10 V one-axis pulse). Here
+the current is limited smoothly,
+
+    i_lim = i / (1 + (i / I_max)^2n)^(1 / 2n),   n = LIMIT_SHARPNESS,
+
+which is i to within 0.3 % up to 0.875 I_max (7 A of 8) and I_max from 1.2 I_max on. I_max is
+the amplifier's data-sheet value, held in fits like the motor constants.
+
+    hframe-id fit --model-file models/one_axis_current_limit.py \\
+        --initial models/one-axis-current-limit.yaml datasets/realistic/5V_oneaxis.mcap \\
+        datasets/realistic/10V_oneaxis.mcap
+"""
+
+from hframe_id.models import ParameterSpec, Signal, declare
+
+#: Exponent n of the smooth limit (2n = 20): sharp enough to leave currents below 7/8 of the
+#: limit alone (0.3 %), smooth enough for the integrator.
+LIMIT_SHARPNESS = 10
+
+
+def limited_current(i, i_max):
+    """The current i [A] limited smoothly to +/- i_max [A] (even powers only: smooth at 0)."""
+    return i / (1 + (i / i_max) ** (2 * LIMIT_SHARPNESS)) ** (1 / (2 * LIMIT_SHARPNESS))
+
+
+def equations(q, qdot, u, p):
+    """Energies and forces of the one-axis drive (as ``hframe_id.models.one_axis``), the motor
+    torque through the current limit."""
+    r = p["r"]
+    current = (p["g_1"] * u["u1"] - p["K_e"] * qdot["phi1"]) / p["R"]
+    return {
+        "kinetic": 0.5
+        * (p["J_1"] * qdot["phi1"] ** 2 + p["M"] * qdot["x"] ** 2 + p["J_2"] * qdot["phi3"] ** 2),
+        "potential": 0.5 * p["k1"] * (q["phi1"] * r - q["x"]) ** 2
+        + 0.5 * p["k2"] * (q["x"] - q["phi3"] * r) ** 2
+        + 0.5 * p["k3"] * (r * (q["phi3"] - q["phi1"])) ** 2,
+        "forces": {"phi1": p["K_t"] * limited_current(current, p["I_max"])},
+        "friction": {"phi1": ("B_1", "tau_c1"), "x": ("b", "F_c"), "phi3": ("B_2", "tau_c2")},
+    }
+
+
+MODEL = declare(
+    name="one-axis-current-limit",
+    description="one-axis belt drive with a current-limited amplifier (Ch. 2 + a servo "
+    "amplifier's peak current)",
+    coordinates=[
+        Signal("phi1", "rad", "motor pulley angle"),
+        Signal("x", "m", "cart position"),
+        Signal("phi3", "rad", "idler pulley angle"),
+    ],
+    inputs=[Signal("u1", "V", "commanded motor voltage")],
+    outputs=["phi1", "x"],
+    parameters=[
+        ParameterSpec("r", "m", "pulley radius"),
+        ParameterSpec("k1", "N/m", "belt stiffness, motor pulley to cart"),
+        ParameterSpec("k2", "N/m", "belt stiffness, cart to idler pulley"),
+        ParameterSpec("k3", "N/m", "belt stiffness, return section between the pulleys"),
+        ParameterSpec("J_1", "kg m^2", "inertia of the motor pulley (with motor)"),
+        ParameterSpec("J_2", "kg m^2", "inertia of the idler pulley"),
+        ParameterSpec("M", "kg", "mass of the cart"),
+        ParameterSpec("B_1", "N m s/rad", "viscous friction of the motor pulley"),
+        ParameterSpec("B_2", "N m s/rad", "viscous friction of the idler pulley"),
+        ParameterSpec("b", "N s/m", "viscous friction of the cart"),
+        ParameterSpec("tau_c1", "N m", "Coulomb friction torque of the motor pulley", "nonnegative"),
+        ParameterSpec("tau_c2", "N m", "Coulomb friction torque of the idler pulley", "nonnegative"),
+        ParameterSpec("F_c", "N", "Coulomb friction force of the cart", "nonnegative"),
+        ParameterSpec("K_t", "N m/A", "motor torque constant"),
+        ParameterSpec("K_e", "V s/rad", "motor back-EMF constant"),
+        ParameterSpec("R", "ohm", "armature resistance"),
+        ParameterSpec("g_1", "V/V", "amplifier gain"),
+        ParameterSpec("I_max", "A", "amplifier current limit (data sheet)"),
+    ],
+    equations=equations,
+    reference="one-axis-current-limit.yaml",
+    reference_label="Table 2.1 + 2.3, 8 A amplifier",
+    fixed=("r", "K_t", "K_e", "R", "g_1", "I_max"),
+    held=("J_2", "B_2", "tau_c2"),
+)
