@@ -15,7 +15,7 @@ the amplifier's data-sheet value, held in fits like the motor constants.
         datasets/realistic/10V_oneaxis.mcap
 """
 
-from hframe_id.models import ParameterSpec, Signal, declare
+from hframe_id.models import ParameterSpec, declare, one_axis
 
 #: Exponent n of the smooth limit (2n = 20): sharp enough to leave currents below 7/8 of the
 #: limit alone (0.3 %), smooth enough for the integrator.
@@ -47,31 +47,11 @@ MODEL = declare(
     name="one-axis-current-limit",
     description="one-axis belt drive with a current-limited amplifier (Ch. 2 + a servo "
     "amplifier's peak current)",
-    coordinates=[
-        Signal("phi1", "rad", "motor pulley angle"),
-        Signal("x", "m", "cart position"),
-        Signal("phi3", "rad", "idler pulley angle"),
-    ],
-    inputs=[Signal("u1", "V", "commanded motor voltage")],
-    outputs=["phi1", "x"],
+    coordinates=list(one_axis.COORDINATES),
+    inputs=list(one_axis.INPUTS),
+    outputs=list(one_axis.OUTPUTS),
     parameters=[
-        ParameterSpec("r", "m", "pulley radius"),
-        ParameterSpec("k1", "N/m", "belt stiffness, motor pulley to cart"),
-        ParameterSpec("k2", "N/m", "belt stiffness, cart to idler pulley"),
-        ParameterSpec("k3", "N/m", "belt stiffness, return section between the pulleys"),
-        ParameterSpec("J_1", "kg m^2", "inertia of the motor pulley (with motor)"),
-        ParameterSpec("J_2", "kg m^2", "inertia of the idler pulley"),
-        ParameterSpec("M", "kg", "mass of the cart"),
-        ParameterSpec("B_1", "N m s/rad", "viscous friction of the motor pulley"),
-        ParameterSpec("B_2", "N m s/rad", "viscous friction of the idler pulley"),
-        ParameterSpec("b", "N s/m", "viscous friction of the cart"),
-        ParameterSpec("tau_c1", "N m", "Coulomb friction torque of the motor pulley", "nonnegative"),
-        ParameterSpec("tau_c2", "N m", "Coulomb friction torque of the idler pulley", "nonnegative"),
-        ParameterSpec("F_c", "N", "Coulomb friction force of the cart", "nonnegative"),
-        ParameterSpec("K_t", "N m/A", "motor torque constant"),
-        ParameterSpec("K_e", "V s/rad", "motor back-EMF constant"),
-        ParameterSpec("R", "ohm", "armature resistance"),
-        ParameterSpec("g_1", "V/V", "amplifier gain"),
+        *one_axis.PARAMETERS,
         ParameterSpec("I_max", "A", "amplifier current limit (data sheet)"),
     ],
     equations=equations,
