@@ -368,15 +368,16 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
         return
     if options.consider_method == "refit":
         variances = _refit_consider_variances(problem, recordings, state, held, prior)
+        variances = {n: variances[problem.free_names.index(n)] for n in result.free_names}
     else:
         variances = _linear_consider_variances(problem, recordings, state, result, held, prior)
     z = result.statistics.z_value(options.confidence)
     extra = {}
-    for k, name in enumerate(result.free_names):
+    for name in result.free_names:
         est = result.estimates[name]
         f = problem.free_names.index(name)
         signed, scale = problem.signed[f], problem.signed_scale[f]
-        variance = max(float(variances[k]), 0.0)
+        variance = max(float(variances[name]), 0.0)
         theta_std = est.std_error / scale if signed else est.relative_std
         std, rel, ci95 = spread(est.estimate, math.sqrt(theta_std**2 + variance), signed, scale, z)
         extra[name] = math.sqrt(variance)
@@ -385,8 +386,8 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
     result.diagnostics["consider"]["method"] = options.consider_method
 
 
-def _linear_consider_variances(problem, recordings, state, result, held, prior) -> np.ndarray:
-    """Per free parameter, the variance (in its theta units) the held parameters' priors add,
+def _linear_consider_variances(problem, recordings, state, result, held, prior) -> dict:
+    """Per free parameter (name), the variance (in its theta units) the held parameters' priors add,
     linearised at the optimum: diag S P S^T (``consider.consider_covariance``)."""
     names = problem.model.parameter_names
     p = problem.parameters(state.theta)
@@ -405,14 +406,14 @@ def _linear_consider_variances(problem, recordings, state, result, held, prior) 
         jac[:, :n_estimated], jac[:, n_estimated:], np.array([prior[n] for n in held])
     )
     offset = n_estimated - len(result.free_names)
-    return np.array([added[offset + k, offset + k] for k in range(len(result.free_names))])
+    return {name: added[offset + k, offset + k] for k, name in enumerate(result.free_names)}
 
 
 def _refit_consider_variances(problem, recordings, state, held, prior) -> np.ndarray:
-    """Per free parameter, the variance (in its theta units) the held parameters' priors add,
-    from refits: the whole fit repeated from its start with each held value at
-    exp(+/-sigma) times itself, and half the difference of the two estimates taken as that
-    prior's one-sigma effect. A held idler 15 % off moved the one-axis fit's B_1 by +52 %
+    """Per free parameter (``problem.free`` order), the variance (in its theta units) the held
+    parameters' priors add, from refits: the whole fit repeated from its start with each held
+    value at exp(+/-sigma) times itself, and half the difference of the two estimates taken as
+    that prior's one-sigma effect. A held idler 15 % off moved the one-axis fit's B_1 by +52 %
     where the tangent at the optimum predicts 5 %, and warm-started refits (which stay in the
     optimum's basin) covered no better than the tangent (docs/fitting.md)."""
     names = problem.model.parameter_names
