@@ -93,7 +93,9 @@ class ProcessDrawer:
     of it forked after the import (where the system can fork); a context manager.
 
     The functions and their arguments are pickled: module-level functions of plain data
-    (``hframe_id.fitting.report_figures``).
+    (``hframe_id.fitting.report_figures``). The worker is spawned, so the calling program's
+    main module must guard its work with ``if __name__ == "__main__":`` (the console script
+    and ``python -m hframe_id`` do).
     """
 
     def __init__(self, prepare: Callable[[], None] | None = None, workers: int = 2) -> None:
