@@ -177,10 +177,18 @@ class FitResult:
             f"{name} = {self.parameters.values[name]:.4g} (+/-{100 * std:.0f} %)"
             for name, std in prior.items()
         )
+        how = {
+            "linear": "consider covariance, linearised at the optimum",
+            "refit": "the spread of whole refits with each held value at exp(+/-std) of itself",
+        }[self.diagnostics["consider"].get("method", "linear")]
+        failed = self.diagnostics["consider"].get("failed_refits", [])
+        caveat = (
+            f" {len(failed)} of the refits did not converge: {'; '.join(failed)}." if failed else ""
+        )
         return (
             f"Held at the initial file's values, not fitted: {held}. The intervals include "
-            "this prior uncertainty of the held values (consider covariance, linearised at the "
-            "optimum); they do not assume the held values are exact."
+            f"this prior uncertainty of the held values ({how}); they do not assume the held "
+            f"values are exact.{caveat}"
         )
 
     def summary(self) -> str:
@@ -367,7 +375,8 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
     if not held or not result.free_names:
         return
     if options.consider_method == "refit":
-        variances = _refit_consider_variances(problem, recordings, state, held, prior)
+        variances, failed = _refit_consider_variances(problem, recordings, state, held, prior)
+        result.diagnostics["consider"]["failed_refits"] = failed
         variances = {n: variances[problem.free_names.index(n)] for n in result.free_names}
     else:
         variances = _linear_consider_variances(problem, recordings, state, result, held, prior)
@@ -409,27 +418,36 @@ def _linear_consider_variances(problem, recordings, state, result, held, prior) 
     return {name: added[offset + k, offset + k] for k, name in enumerate(result.free_names)}
 
 
-def _refit_consider_variances(problem, recordings, state, held, prior) -> np.ndarray:
+def _refit_consider_variances(
+    problem, recordings, state, held, prior
+) -> tuple[np.ndarray, list[str]]:
     """Per free parameter (``problem.free`` order), the variance (in its theta units) the held
     parameters' priors add, from refits: the whole fit repeated from its start with each held
     value at exp(+/-sigma) times itself, and half the difference of the two estimates taken as
     that prior's one-sigma effect. A held idler 15 % off moved the one-axis fit's B_1 by +52 %
     where the tangent at the optimum predicts 5 %, and warm-started refits (which stay in the
-    optimum's basin) covered no better than the tangent (docs/fitting.md)."""
+    optimum's basin) covered no better than the tangent (docs/fitting.md). Also returns the
+    refits that did not converge ("name xfactor: message"); their ends count all the same,
+    stated in the held statement.
+    """
     names = problem.model.parameter_names
     p = problem.parameters(state.theta)
     quiet = replace(problem.options, consider={}, verbose=0, progress=None)
     variances = np.zeros(len(problem.free))
+    failed = []
     for name in held:
         ends = []
         for sign in (1.0, -1.0):
-            value = float(p[names.index(name)]) * math.exp(sign * prior[name])
+            factor = math.exp(sign * prior[name])
+            value = float(p[names.index(name)]) * factor
             refit = fit_recordings(
                 recordings, problem.initial.replace_values(**{name: value}), quiet
             )
+            if not refit.success:
+                failed.append(f"{name} x{factor:.3g}: {refit.message}")
             ends.append(problem.theta_of(refit.parameters))
         variances += ((ends[0] - ends[1]) / 2.0) ** 2
-    return variances
+    return variances, failed
 
 
 def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):

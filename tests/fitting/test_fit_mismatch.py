@@ -150,6 +150,8 @@ def test_refit_consider_agrees_with_the_linear_one_where_the_effect_is_linear():
         result = fit_recordings(recordings, table, options)
         assert result.success, result.message
         assert result.diagnostics["consider"]["method"] == method
+        # the held statement says how the prior entered (not "linearised" for refits)
+        assert ("linearised" in result.held_statement()) == (method == "linear")
         added[method] = result.diagnostics["consider"]["relative_std_added"]
     assert added["refit"]["k_l"] == pytest.approx(added["linear"]["k_l"], rel=0.3)
     for method in ("linear", "refit"):
