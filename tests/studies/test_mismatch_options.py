@@ -32,3 +32,20 @@ def test_train_option_reaches_the_trials(monkeypatch, capsys):
     with pytest.raises(SystemExit):
         mismatch.main(["--train", "pulses"])
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_training_criterion_prefers_the_parameters_that_made_the_data():
+    """sum_j N_j log rms_j of the free-run residuals: lower for the set that generated the
+    recording than for one with a belt 50 % stiffer."""
+    import numpy as np
+
+    from hframe_id.parameters import load_parameter_file
+    from hframe_id.recordings.simulated import simulate_recording
+    from hframe_id.studies.mismatch import TABLE_4_2, training_criterion
+
+    table = load_parameter_file(TABLE_4_2)
+    u = np.zeros((300, 2))
+    u[50:250] = (-4.0, 4.0)
+    recording = simulate_recording(table, u, seed=2)
+    stiffer = table.replace_values(k_l=1.5 * table.values["k_l"])
+    assert training_criterion(table, [recording]) < training_criterion(stiffer, [recording])
