@@ -98,7 +98,7 @@ def chosen_command(argv: Sequence[str]) -> str | None:
 
 class _VersionAction(argparse.Action):
     """``--version``: the installed version, read only when asked for (the package metadata
-    costs 30 ms to import, a third of ``hframe-id --help``)."""
+    cost 30-64 ms to import, measured, up to half of ``hframe-id --help``)."""
 
     def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs):
         super().__init__(
