@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions
-from hframe_id.fitting.equation_error import equation_error_start, savgol_derivative
+from hframe_id.fitting.equation_error import (
+    convolve_zero_padded,
+    equation_error_start,
+    savgol_derivative,
+)
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton
@@ -183,4 +187,20 @@ def test_savitzky_golay_derivative_is_scipy_bit_for_bit_in_the_interior(window, 
     expected = savgol_filter(y, window, 3, deriv=deriv, delta=1e-3)[half:-half]
     np.testing.assert_array_equal(
         savgol_derivative(y, window, 3, deriv, 1e-3)[half:-half], expected
+    )
+
+
+@pytest.mark.parametrize(
+    "weights",
+    [[1.0, 2.0, 1.0], [-0.5, 0.0, 0.5], [0.3, -1.2, 2.5, 0.7, -0.1]],
+    ids=["symmetric", "antisymmetric", "general"],
+)
+def test_zero_padded_convolution_is_scipy_bit_for_bit(weights):
+    """Each of the C loop's three paths (the weights' symmetry decides), on a rough signal
+    whose sums round differently in another order."""
+    from scipy.ndimage import convolve1d
+
+    y = np.cumsum(np.random.default_rng(1).normal(size=500)) * 1e3
+    np.testing.assert_array_equal(
+        convolve_zero_padded(y, np.array(weights)), convolve1d(y, weights, mode="constant")
     )
