@@ -78,7 +78,10 @@ RESTART_MIN_GAIN = 2.0
 #: "at the bound": the bound, not the data, fixes it. Exactly on the bound is not required:
 #: under mismatch a parameter running into its bound stopped 2e-4 (relative) short of it
 #: when the stage ended on its cost criterion, and was reported converged while a fit with
-#: the same parameter 1e-9 closer was reported at the bound.
+#: the same parameter 1e-9 closer was reported at the bound. Such a fit still succeeds when
+#: its solver converged (issue 9: a failure is a solver that did not converge): the box is
+#: part of the problem, and the parameters it stopped are named in the message, the report
+#: and the parameter file (``at_bound``), their intervals ending at the bound.
 AT_BOUND_STD = 0.1
 #: Noise estimation (``FitOptions.noise``): a sensor-weighted fit whose residual rms exceeds
 #: this many sensor std does not fit at the noise level (matched sim-rig fits end at
@@ -109,7 +112,9 @@ class ParameterEstimate:
     [p / f, p * f] with f = exp(z * relative_std), except for signed parameters (offsets),
     fitted linearly, whose interval is p -/+ z std_error. Fixed parameters have zero error and
     ``free`` False; free parameters the data do not identify are held at their initial
-    value, with ``identified`` False and the standard error they had when found out.
+    value, with ``identified`` False and the standard error they had when found out. A free
+    parameter the box stopped has ``at_bound`` True, ``identified`` False (the bound, not the
+    data, fixes it) and an interval that ends at the bound.
     """
 
     name: str
@@ -199,14 +204,14 @@ class FitResult:
                 continue
             if not self.success:
                 status = "not assessed (fit failed)"
+            elif est.at_bound:
+                status = "at bound (the box fixes it)"
             elif est.identified:
                 status = "identified"
             elif est.name in self.not_identified:
                 status = "NOT identified (held)"
             else:
                 status = f"poorly determined (relative std {est.relative_std:.0%})"
-            if est.at_bound:
-                status += ", at bound"
             lines.append(
                 f"{est.key:<22} {est.initial:>11.5g} {est.estimate:>11.5g} "
                 f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]  {status}"
@@ -389,6 +394,8 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
         variance = max(float(variances[name]), 0.0)
         theta_std = est.std_error / scale if signed else est.relative_std
         std, rel, ci95 = spread(est.estimate, math.sqrt(theta_std**2 + variance), signed, scale, z)
+        if est.at_bound:
+            ci95 = _ended_at_bound(problem, state, f, est.estimate, ci95)
         extra[name] = math.sqrt(variance)
         result.estimates[name] = replace(est, relative_std=rel, std_error=std, ci95=ci95)
     result.diagnostics["consider"]["relative_std_added"] = extra
@@ -917,6 +924,13 @@ def _estimate_states(ms, nodes, velocity, theta, active, stages, progress):
     return state.nodes, merit
 
 
+def _ended_at_bound(problem, state, f: int, value: float, ci95: tuple[float, float]):
+    """The interval of free parameter ``f`` (at a bound, ``value``) cut at that bound: the box
+    allowed no values beyond it."""
+    lower = state.theta[f] - problem.theta_lower[f] < problem.theta_upper[f] - state.theta[f]
+    return (value, ci95[1]) if lower else (ci95[0], value)
+
+
 def spread(
     value: float, theta_std: float, signed: bool, scale: float, z: float
 ) -> tuple[float, float, tuple[float, float]]:
@@ -966,9 +980,12 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         bound = bool(state.active[f]) and is_at_bound(
             state.theta[f], problem.theta_lower[f], problem.theta_upper[f], rel
         )
-        if bound:
+        if bound:  # the box, not the data, fixes it
             at_bound.append(name)
+            identified = False
         std, rel, ci95 = spread(value, rel, problem.signed[f], problem.signed_scale[f], z)
+        if bound:
+            ci95 = _ended_at_bound(problem, state, f, value, ci95)
         estimates[name] = ParameterEstimate(
             name=name,
             unit=spec.unit,
@@ -993,7 +1010,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
             estimates[name] = replace(estimates[name], identified_by=designs)
     misfit = ms.residual_rms(state.evaluation.cost)
     too_far = misfit > options.max_misfit
-    success = final.converged and not at_bound and not too_far
+    success = final.converged and not too_far
     if not final.converged:
         message = f"did not converge: {final.message}"
     elif too_far:
@@ -1002,13 +1019,16 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
             f"(limit {options.max_misfit:g}, FitOptions.max_misfit / --max-misfit); a local "
             "optimum far from the data: try a start closer to the plant"
         )
-    elif at_bound:
-        message = f"ended at a bound: {', '.join(at_bound)} (widen --bounds or fix them)"
     else:
         message = final.message
+        if at_bound:
+            message += (
+                f"; at a bound (the box, not the data, ends them there; their intervals stop "
+                f"at it; --bounds widens it): {', '.join(at_bound)}"
+            )
         if not_identified:
             message += f"; not identified (held at initial value): {', '.join(not_identified)}"
-        poorly = [n for n in stats.names if not estimates[n].identified]
+        poorly = [n for n in stats.names if not estimates[n].identified and n not in at_bound]
         if poorly:
             message += (
                 f"; poorly determined (relative std > {options.identifiability_threshold:.0%}, "

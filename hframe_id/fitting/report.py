@@ -201,14 +201,14 @@ def parameter_table(
         diff = f"{100 * (est.estimate / ref - 1):+.2f} %" if ref else "n/a"
         if not result.success:
             status = "not assessed (fit failed)"
+        elif est.at_bound:
+            status = "**at bound** (the box fixes it; interval ends there)"
         elif est.identified:
             status = "yes"
         elif est.name in result.not_identified:
             status = "**no** (held at initial)"
         else:
             status = "poorly determined (kept at estimate)"
-        if est.at_bound:
-            status += ", at bound"
         cells = (
             est.key,
             _fmt(ref) if ref is not None else "n/a",

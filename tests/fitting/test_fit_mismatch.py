@@ -156,3 +156,23 @@ def test_refit_consider_agrees_with_the_linear_one_where_the_effect_is_linear():
     assert added["refit"]["k_l"] == pytest.approx(added["linear"]["k_l"], rel=0.3)
     for method in ("linear", "refit"):
         assert 0 < added[method]["M_bridge"] < 0.1 * added[method]["k_l"], method
+
+
+def test_a_fit_the_box_stops_succeeds_and_says_so():
+    """A converged fit with a parameter on its bound is a success (a failure is a solver that
+    did not converge): the parameter is named, flagged, and its interval ends at the bound.
+    Data from b_bridge = 32.5 N s/m, fitted inside [40, 60]: the box stops it at 40."""
+    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    from hframe_id.recordings.simulated import simulate_recording
+
+    u = np.zeros((400, 2))
+    u[50:350] = (-4.0, 4.0)
+    start = table.replace_values(b_bridge=50.0)
+    options = FitOptions(free=("k_l", "b_bridge"), bounds={"b_bridge": (40.0, 60.0)})
+    result = fit_recordings([simulate_recording(table, u, seed=3)], start, options)
+    est = result.estimates["b_bridge"]
+    assert result.success and est.at_bound and not est.identified
+    assert est.estimate == pytest.approx(40.0, rel=1e-6)
+    assert est.ci95[0] == est.estimate < est.ci95[1]
+    assert "at a bound" in result.message and "b_bridge" in result.message
+    assert not result.estimates["k_l"].at_bound
