@@ -114,7 +114,10 @@ class ParameterEstimate:
     ``free`` False; free parameters the data do not identify are held at their initial
     value, with ``identified`` False and the standard error they had when found out. A free
     parameter the box stopped has ``at_bound`` True, ``identified`` False (the bound, not the
-    data, fixes it) and an interval that ends at the bound.
+    data, fixes it) and an interval that ends at the bound. After a leave-one-recording-out
+    cross-validation, ``jackknife_std`` and ``jackknife_ci95`` are the experiment-level
+    jackknife's (``fitting.jackknife``), which hold model error that differs between
+    experiments; None without one.
     """
 
     name: str
@@ -130,6 +133,8 @@ class ParameterEstimate:
     collinearity: float = 1.0
     at_bound: bool = False
     identified_by: tuple[str, ...] = ()
+    jackknife_std: float | None = None
+    jackknife_ci95: tuple[float, float] | None = None
 
     @property
     def key(self) -> str:
@@ -198,7 +203,11 @@ class FitResult:
 
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted +/- 95 %, identified."""
-        lines = [f"{'parameter':<22} {'initial':>11} {'fitted':>11} {'95 % interval':>25}  status"]
+        jackknife = any(est.jackknife_ci95 for est in self.estimates.values())
+        extra = f" {'jackknife 95 % interval':>25}" if jackknife else ""
+        lines = [
+            f"{'parameter':<22} {'initial':>11} {'fitted':>11} {'95 % interval':>25}{extra}  status"
+        ]
         for est in self.estimates.values():
             if not est.free:
                 continue
@@ -212,9 +221,12 @@ class FitResult:
                 status = "NOT identified (held)"
             else:
                 status = f"poorly determined (relative std {est.relative_std:.0%})"
+            if jackknife:
+                ci = est.jackknife_ci95
+                extra = f" [{ci[0]:>10.5g}, {ci[1]:>10.5g}]" if ci else f" {'n/a':>25}"
             lines.append(
                 f"{est.key:<22} {est.initial:>11.5g} {est.estimate:>11.5g} "
-                f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]  {status}"
+                f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]{extra}  {status}"
             )
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "

@@ -9,7 +9,9 @@ controller and the exporters read it like the thesis's; its header adds
   levels: how the fit weighed each channel and its residual rms, with the model-mismatch
   statement when the model does not follow the data at the sensors' noise level;
 - ``uncertainty``: per free parameter the estimate, standard error, 95 % interval, whether the
-  data identify it (and which experiments would), plus the correlation matrix.
+  data identify it (and which experiments would), whether the box stopped it (``at_bound``),
+  after a cross-validation the experiment-level jackknife's std and 95 % interval, plus the
+  correlation matrix.
 
 Only a successful fit gets a parameter file: a failed one must not be taken for a good one.
 """
@@ -164,8 +166,9 @@ def noise_levels(result: FitResult) -> dict[str, Any]:
 
 def uncertainty(result: FitResult) -> dict[str, Any]:
     """The ``uncertainty`` block of a fitted parameter file: per free parameter the estimate,
-    standard error and interval (SI units), identifiability and bound flags; the method,
-    confidence level, held parameters and the correlation matrix."""
+    standard error and interval (SI units), identifiability and bound flags, the jackknife's
+    std and interval when cross-validated; the method, confidence level, held parameters and
+    the correlation matrix."""
     level = f"{round(100 * result.options.confidence)} %"
     per_parameter = {}
     for est in result.estimates.values():
@@ -177,6 +180,16 @@ def uncertainty(result: FitResult) -> dict[str, Any]:
             f"interval_{level.replace(' %', '')}": [_number(est.ci95[0]), _number(est.ci95[1])],
             "identified": bool(est.identified),
             "at_bound": bool(est.at_bound),
+            **(
+                {
+                    "jackknife_std": _number(est.jackknife_std),
+                    f"interval_{level.replace(' %', '')}_jackknife": [
+                        _number(v) for v in est.jackknife_ci95
+                    ],
+                }
+                if est.jackknife_ci95
+                else {}
+            ),
             **({"identified_by": list(est.identified_by)} if est.identified_by else {}),
         }
     held = result.held_statement()

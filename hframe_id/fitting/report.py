@@ -181,8 +181,9 @@ def parameter_table(
     truth_label: str = "truth",
 ) -> list[str]:
     """Markdown rows of the free parameters: reference value (``thesis``, labelled
-    ``label``), fitted value, interval, difference from the reference [%], identifiability
-    and, with ``truth``, the error against it [%]; units in the parameter names."""
+    ``label``), fitted value, interval, the experiment-level jackknife's interval (after a
+    cross-validation), difference from the reference [%], identifiability and, with
+    ``truth``, the error against it [%]; units in the parameter names."""
     header = (
         "parameter",
         f"reference ({label})",
@@ -191,6 +192,9 @@ def parameter_table(
         "vs reference",
         "identified",
     )
+    jackknife = any(est.jackknife_ci95 for est in result.estimates.values())
+    if jackknife:
+        header = header[:4] + ("95 % interval, experiments (jackknife)",) + header[4:]
     if truth:
         header += (truth_label, "error vs truth")
     rows = [header]
@@ -217,6 +221,9 @@ def parameter_table(
             diff,
             status,
         )
+        if jackknife:
+            ci = est.jackknife_ci95
+            cells = cells[:4] + (f"[{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "n/a",) + cells[4:]
         if truth:
             t = truth.values[est.name]
             cells += (_fmt(t), f"{100 * (est.estimate / t - 1):+.3f} %")
@@ -409,7 +416,7 @@ def _jackknife_sentence(result: FitResult, table: LeaveOneOutTable) -> list[str]
         "The fit's intervals account for noise only. Across experiments, these parameters "
         "move by more than twice their standard error (jackknife std / fit std): "
         f"{', '.join(wider)}. Model error that differs between experiments is larger than the "
-        "intervals say; read the jackknife std as their uncertainty.",
+        "intervals say; read the jackknife interval of the parameter table as theirs.",
         "",
     ]
 
@@ -472,6 +479,13 @@ def _report_lines(
         intro += f" {truth_note}"
     else:
         intro += "." + (f" {truth_note}" if truth_note else "")
+    if any(est.jackknife_ci95 for est in result.estimates.values()):
+        intro += (
+            " Two 95 % intervals: the fit's (noise, robust to correlated residuals, with any "
+            "held parameter's prior) and the experiments' (delete-one-recording jackknife, "
+            "Student's t with n - 1 degrees of freedom for n recordings), which holds model "
+            "error that differs between experiments. Under model mismatch read the wider one."
+        )
     held = result.held_statement()
     lines += [
         "## Parameters",

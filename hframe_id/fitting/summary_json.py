@@ -12,6 +12,9 @@ One JSON object, the same shape for every model::
 
 Values are SI, in the parameter's ``unit``. Parameters that were not free have ``std`` and
 ``interval_95`` null; numbers that are not finite (an interval the data do not bound) are null.
+``at_bound``: the box, not the data, stopped the parameter (its interval ends at the bound).
+A fit of several recordings that was cross-validated adds ``interval_95_jackknife`` (the
+experiment-level jackknife's, ``fitting.jackknife``) to each free parameter it moved.
 """
 
 from __future__ import annotations
@@ -41,8 +44,11 @@ def fit_summary(
             "interval_95": [_number(v) for v in est.ci95] if est.free else None,
             "free": bool(est.free),
             "identified": bool(est.identified),
+            "at_bound": bool(est.at_bound),
             "initial": _number(est.initial),
         }
+        if est.jackknife_ci95:
+            parameters[name]["interval_95_jackknife"] = [_number(v) for v in est.jackknife_ci95]
     units = {s.name: s.unit for s in result.problem.model.outputs} if result.problem else {}
     rms = result.diagnostics.get("channel_rms", {})
     std = result.diagnostics.get("channel_std", {})

@@ -1,6 +1,7 @@
 """`hframe-id fit` end to end: files on success, none on failure, errors before solving."""
 
 import contextlib
+import math
 import io
 from pathlib import Path
 
@@ -8,6 +9,7 @@ import pytest
 import yaml
 
 from hframe_id.cli import main
+from hframe_id.fitting.jackknife import student_t_quantile
 from hframe_id.parameters import load_parameter_file
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -203,6 +205,14 @@ def test_several_recordings_get_a_leave_one_out_table(tmp_path, capsys):
     assert "cross-validation 2/2: fitting without y.mcap" in err
     (report,) = (tmp_path / "cv").glob("*-report.md")
     assert "## Leave-one-recording-out cross-validation" in report.read_text()
+    assert "95 % interval, experiments (jackknife)" in report.read_text()
+    # The parameter file carries the jackknife interval beside the fit's own: 2 folds, so
+    # Student's t with 1 degree of freedom, in log(p) around the estimate.
+    (fitted,) = (tmp_path / "cv").glob("*.yaml")
+    k_l = yaml.safe_load(fitted.read_text())["uncertainty"]["parameters"]["k_l [N/m]"]
+    low, high = k_l["interval_95_jackknife"]
+    factor = math.exp(student_t_quantile(0.975, 1) * k_l["jackknife_std"] / k_l["estimate"])
+    assert (low, high) == pytest.approx((k_l["estimate"] / factor, k_l["estimate"] * factor))
     assert main([*args, "--out-dir", str(tmp_path / "no-cv"), "--no-cross-validation"]) == 0
     assert "cross-validation" not in capsys.readouterr().err
     (report,) = (tmp_path / "no-cv").glob("*-report.md")
