@@ -7,8 +7,9 @@ quiet). A worker started with the command imports matplotlib while this process 
 inputs and imports the fitter (both single-threaded; 0.45 s, against the worker's 0.55 s
 with its own start, so the import overlaps the solve's first 0.1 s and slows it by about as
 much), forks a copy of itself, and both wait without using the CPU while the fit solves on
-every core; then they draw the figures side by side while the report is written. ``finish`` waits for every figure and raises the first
-failure, so the caller can drop a half-drawn plots folder.
+every core; then they draw the figures side by side while the report is written.
+``finish`` waits for every figure and raises the first failure, so the caller can drop a
+half-drawn plots folder.
 """
 
 from __future__ import annotations

@@ -202,7 +202,9 @@ class FitResult:
         )
 
     def summary(self) -> str:
-        """A one-screen table: parameter, initial, fitted +/- 95 %, identified."""
+        """A one-screen table: parameter, initial, fitted, 95 % interval, the jackknife's
+        95 % interval (after a cross-validation), status (identified, held, at bound, poorly
+        determined); then the verdict line."""
         jackknife = any(est.jackknife_ci95 for est in self.estimates.values())
         extra = f" {'jackknife 95 % interval':>25}" if jackknife else ""
         lines = [
@@ -407,7 +409,7 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
         theta_std = est.std_error / scale if signed else est.relative_std
         std, rel, ci95 = spread(est.estimate, math.sqrt(theta_std**2 + variance), signed, scale, z)
         if est.at_bound:
-            ci95 = _ended_at_bound(problem, state, f, est.estimate, ci95)
+            ci95 = _ended_at_bound(problem, state, f, ci95)
         extra[name] = math.sqrt(variance)
         result.estimates[name] = replace(est, relative_std=rel, std_error=std, ci95=ci95)
     result.diagnostics["consider"]["relative_std_added"] = extra
@@ -936,11 +938,14 @@ def _estimate_states(ms, nodes, velocity, theta, active, stages, progress):
     return state.nodes, merit
 
 
-def _ended_at_bound(problem, state, f: int, value: float, ci95: tuple[float, float]):
-    """The interval of free parameter ``f`` (at a bound, ``value``) cut at that bound: the box
+def _ended_at_bound(problem, state, f: int, ci95: tuple[float, float]) -> tuple[float, float]:
+    """The interval of free parameter ``f`` (at a bound) cut at that bound [SI]: the box
     allowed no values beyond it."""
     lower = state.theta[f] - problem.theta_lower[f] < problem.theta_upper[f] - state.theta[f]
-    return (value, ci95[1]) if lower else (ci95[0], value)
+    theta = state.theta.copy()
+    theta[f] = problem.theta_lower[f] if lower else problem.theta_upper[f]
+    bound = float(problem.parameters(theta)[problem.free[f]])
+    return (bound, max(ci95[1], bound)) if lower else (min(ci95[0], bound), bound)
 
 
 def spread(
@@ -997,7 +1002,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
             identified = False
         std, rel, ci95 = spread(value, rel, problem.signed[f], problem.signed_scale[f], z)
         if bound:
-            ci95 = _ended_at_bound(problem, state, f, value, ci95)
+            ci95 = _ended_at_bound(problem, state, f, ci95)
         estimates[name] = ParameterEstimate(
             name=name,
             unit=spec.unit,

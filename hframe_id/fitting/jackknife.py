@@ -4,9 +4,11 @@ The fit's intervals (robust sandwich / HAC, plus any held parameter's prior) des
 noise. Under model error the estimate also depends on which experiments were fitted, and the
 delete-one-recording jackknife of the leave-one-out cross-validation measures that
 (``validation.cross_validation.Spread.jackknife_std``). Its interval uses Student's t with
-n - 1 degrees of freedom for n converged folds (few experiments: the jackknife std is itself
+n - 1 degrees of freedom for n recordings (few experiments: the jackknife std is itself
 uncertain; t(5) gives 2.57 for 95 %, not 1.96), in log(p) like the fit's own intervals
 (relative std = jackknife std / |p|) except for signed parameters, which are p -/+ t std.
+Only when every fold converged; folds whose parameters stopped at a bound count as converged,
+and their pinned values make the spread smaller than the data alone would.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from hframe_id.fitting.fit import FitResult
+from hframe_id.fitting.fit import FitResult, spread
 from hframe_id.validation.cross_validation import LeaveOneOutTable
 
 
@@ -28,30 +30,32 @@ def student_t_quantile(probability: float, dof: int) -> float:
 def jackknife_interval(
     value: float, jackknife_std: float, folds: int, signed: bool, confidence: float
 ) -> tuple[float, float]:
-    """The ``confidence`` interval of ``value`` from its jackknife std over ``folds`` (>= 2)
-    folds: symmetric in log(value), or linear for a signed parameter (see the module)."""
+    """The ``confidence`` interval of ``value`` (SI, non-zero unless ``signed``) from its
+    jackknife std [SI] over ``folds`` (>= 2) folds: symmetric in log(value), or linear for a
+    signed parameter (``fit.spread`` with Student's t for z)."""
     t = student_t_quantile(0.5 + confidence / 2, folds - 1)
-    if signed or value == 0:
-        return value - t * jackknife_std, value + t * jackknife_std
-    factor = math.exp(min(t * jackknife_std / abs(value), 700.0))
-    return value / factor, value * factor
+    theta_std = jackknife_std if signed else jackknife_std / abs(value)
+    return spread(value, theta_std, signed, 1.0, t)[2]
 
 
 def add_jackknife_intervals(result: FitResult, table: LeaveOneOutTable) -> None:
-    """Give every free parameter with a jackknife std (two or more converged folds) its
-    jackknife interval (``ParameterEstimate.jackknife_ci95``), in place."""
-    folds = sum(fold.success for fold in table.folds)
-    if folds < 2:
+    """Give each free parameter the fit determined (not held, not at a bound) its jackknife
+    std and interval (``ParameterEstimate.jackknife_ci95``), in place; nothing unless every
+    fold converged (a jackknife over the folds that did is not the delete-one jackknife of
+    the estimate from all recordings) and there are two or more."""
+    if len(table.folds) < 2 or not all(fold.success for fold in table.folds):
         return
     signed = {spec.name: spec.signed for spec in result.problem.model.parameters}
     confidence = result.options.confidence
-    for spread in table.spread:
-        est = result.estimates.get(spread.name)
-        if est is None or not est.free or not math.isfinite(spread.jackknife_std):
+    for row in table.spread:
+        est = result.estimates.get(row.name)
+        if est is None or not est.free or est.at_bound or row.name in result.not_identified:
+            continue
+        if not math.isfinite(row.jackknife_std):
             continue
         interval = jackknife_interval(
-            est.estimate, spread.jackknife_std, folds, signed[spread.name], confidence
+            est.estimate, row.jackknife_std, len(table.folds), signed[row.name], confidence
         )
-        result.estimates[spread.name] = replace(
-            est, jackknife_std=spread.jackknife_std, jackknife_ci95=interval
+        result.estimates[row.name] = replace(
+            est, jackknife_std=row.jackknife_std, jackknife_ci95=interval
         )

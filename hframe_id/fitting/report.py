@@ -356,14 +356,19 @@ def _status_lines(result: FitResult, recordings: list[Recording], parameter_file
 
 
 def _not_identified_lines(result: FitResult) -> list[str]:
-    """Free parameters the data do not determine: held at their initial values, or (under
-    model mismatch) kept at their estimates."""
+    """Free parameters the data do not determine: held at their initial values, stopped by
+    a bound of the box, or (under model mismatch) kept at their estimates."""
     weak = [est for est in result.estimates.values() if est.free and not est.identified]
     if not result.success or not weak:
         return []
-    lines = ["## Not identified or poorly determined", ""]
+    lines = ["## Not identified, at a bound or poorly determined", ""]
     for est in weak:
-        if est.name in result.not_identified:
+        if est.at_bound:
+            fate = (
+                f"stopped at a bound of the box, {_fmt(est.estimate)}: the data push it "
+                "further, the box fixes it (--bounds widens the box)."
+            )
+        elif est.name in result.not_identified:
             would = (
                 ", ".join(est.identified_by)
                 if est.identified_by

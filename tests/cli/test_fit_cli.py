@@ -1,8 +1,8 @@
 """`hframe-id fit` end to end: files on success, none on failure, errors before solving."""
 
 import contextlib
-import math
 import io
+import math
 from pathlib import Path
 
 import pytest

@@ -192,12 +192,13 @@ def test_savitzky_golay_derivative_is_scipy_bit_for_bit_in_the_interior(window, 
 
 @pytest.mark.parametrize(
     "weights",
-    [[1.0, 2.0, 1.0], [-0.5, 0.0, 0.5], [0.3, -1.2, 2.5, 0.7, -0.1]],
+    [[0.1, 0.3, 0.7, 0.3, 0.1], [0.3, -0.7, 0.0, 0.7, -0.3], [0.3, -1.2, 2.5, 0.7, -0.1]],
     ids=["symmetric", "antisymmetric", "general"],
 )
 def test_zero_padded_convolution_is_scipy_bit_for_bit(weights):
     """Each of the C loop's three paths (the weights' symmetry decides), on a rough signal
-    whose sums round differently in another order."""
+    whose sums round differently in another order: a loop that always took the general path,
+    or numpy.convolve, differs from SciPy in the last bits on the first two."""
     from scipy.ndimage import convolve1d
 
     y = np.cumsum(np.random.default_rng(1).normal(size=500)) * 1e3
