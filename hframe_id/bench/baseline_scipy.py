@@ -160,7 +160,8 @@ class BaselineResult:
 
     Attributes
     ----------
-    success : the solver met a tolerance, was not capped and no parameter ends at a bound.
+    success : the solver met a tolerance and was not capped (parameters at a bound are
+        named in ``at_bound`` and the message, as the fitter does).
     message : why it stopped.
     estimates : fitted value of every free parameter (SI).
     parameters : the full parameter set (fixed ones at their initial values).
@@ -719,7 +720,7 @@ def fit_single_shooting(
     estimates = {name: float(p[i]) for name, i in zip(free_names, free, strict=True)}
     parameters = initial.replace_values(**estimates)
     return BaselineResult(
-        success=bool(ok and not capped and not at_bound),
+        success=bool(ok and not capped),
         message=message,
         estimates=estimates,
         parameters=parameters,
