@@ -1,0 +1,74 @@
+"""The one-axis mismatch study: one trial on the shipped plant (a fit of about 10 s), its
+pulses against the shipped datasets' protocol, and its options."""
+
+import math
+
+import pytest
+import yaml
+
+from hframe_id.errors import OptionError
+from hframe_id.parameters import load_parameter_file
+from hframe_id.resources import datasets_dir
+from hframe_id.studies import mismatch_one_axis
+from hframe_id.studies.mismatch_one_axis import (
+    HELD_OUT,
+    parse_latency,
+    plant_for,
+    pulse_recordings,
+    run_trial,
+)
+
+
+def test_pulses_are_the_shipped_datasets_protocol():
+    """The fitted pulses carry the protocol fields of 5V_oneaxis.mcap and 10V_oneaxis.mcap;
+    the shipped plant's own parameters are datasets/realistic/truth/one-axis.yaml's."""
+    realistic = datasets_dir() / "realistic"
+    manifest = yaml.safe_load((realistic / "manifest.yaml").read_text())
+    shipped = {e["file"]: e["protocol"] for e in manifest["datasets"]}
+    recordings = pulse_recordings(plant_for(-1), 0)
+    assert [r.experiment for r in recordings] == [
+        shipped["5V_oneaxis.mcap"],
+        shipped["10V_oneaxis.mcap"],
+    ]
+    assert [r.rig["seed"] for r in recordings] == [0, 1]
+    assert all(r.variant == "one-axis" for r in recordings)
+    # the held-out simulations' "plant" parameters: the shipped truth file's
+    truth = load_parameter_file(realistic / "truth" / "one-axis.yaml")
+    assert plant_for(-1).reference().values == truth.values
+
+
+def test_one_trial_on_the_shipped_plant():
+    trial = run_trial(-1)
+    assert trial.seed == -1 and trial.train == "pulses"
+    assert isinstance(trial.success, bool) and trial.message
+    assert math.isfinite(trial.max_defect) and trial.wall_time_s > 0
+    assert set(trial.channel_rms) == {"phi1", "x"}
+    assert set(trial.at_bound) <= set(trial.estimates)
+    for fits in (trial.held_out_fit, trial.reference_fit):
+        assert set(fits) == set(HELD_OUT)
+        for channels in fits.values():
+            assert list(channels) == ["phi1", "x"]
+            assert all(math.isfinite(v) for v in channels.values())
+    assert all(math.isfinite(c) for c in trial.criterion)
+    assert "at_bound=[" in mismatch_one_axis._line(trial)
+
+
+def test_latency_option_reaches_the_fit(monkeypatch):
+    calls = []
+    monkeypatch.setattr(mismatch_one_axis, "run_trial", lambda seed, **kw: calls.append((seed, kw)))
+    monkeypatch.setattr(mismatch_one_axis, "_line", lambda trial: "trial")
+    assert mismatch_one_axis.main(["--seeds", "-1", "4", "--latency", "phi1=1,x=3"]) == 0
+    assert [seed for seed, _ in calls] == [-1, 4]
+    assert all(kw["options"].latency_samples == {"phi1": 1, "x": 3} for _, kw in calls)
+    calls.clear()
+    mismatch_one_axis.main([])
+    assert calls[0][0] == -1 and calls[0][1]["options"].latency_samples == {}
+
+
+def test_parse_latency():
+    assert parse_latency("") == {}
+    assert parse_latency("phi1=1, x=3") == {"phi1": 1, "x": 3}
+    with pytest.raises(OptionError):
+        parse_latency("x=two")
+    with pytest.raises(OptionError):
+        parse_latency("x")
