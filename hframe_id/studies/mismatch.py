@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.recording import Recording
@@ -178,6 +179,25 @@ def _line(t: MismatchTrial) -> str:
     )
 
 
+def parse_latency(text: str) -> dict[str, int]:
+    """``FitOptions.latency_samples`` from ``CHANNEL=SAMPLES,...`` (whole samples, 1 ms each
+    at 1 kHz); empty text: none. A malformed item is an ``OptionError`` naming it."""
+    latency = {}
+    for item in (part.strip() for part in text.split(",")):
+        if not item:
+            continue
+        name, sep, value = (part.strip() for part in item.partition("="))
+        if not sep or not name or not value:
+            raise OptionError(f"--latency must look like CHANNEL=SAMPLES, got {item!r}")
+        try:
+            latency[name] = int(value)
+        except ValueError:
+            raise OptionError(
+                f"--latency {name}: {value!r} is not a whole number of samples"
+            ) from None
+    return latency
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -198,11 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         "sample of actuation delay and two of laser latency: phi1=1,phi2=1,x=3,y=3)",
     )
     args = parser.parse_args(argv)
-    latency = {
-        name: int(value)
-        for name, _, value in (item.partition("=") for item in args.latency.split(",") if item)
-    }
-    options = FitOptions(latency_samples=latency)
+    options = FitOptions(latency_samples=parse_latency(args.latency))
     for seed in args.seeds:
         print(_line(run_trial(seed, options=options, train=args.train)), flush=True)
     if args.noise_seeds:

@@ -27,7 +27,6 @@ import sys
 import time
 from dataclasses import dataclass
 
-from hframe_id.cli.fit_command import _pairs, _samples
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.recording import Recording
@@ -35,7 +34,12 @@ from hframe_id.resources import model_file
 from hframe_id.rig.plant import Plant
 from hframe_id.rig.protocols import MultisineProtocol, PulseProtocol
 from hframe_id.rig.realistic import realistic_plant, record_realistic, shipped_plant
-from hframe_id.studies.mismatch import MismatchTrial, simulation_fit, training_criterion
+from hframe_id.studies.mismatch import (
+    MismatchTrial,
+    parse_latency,
+    simulation_fit,
+    training_criterion,
+)
 
 TABLE_2_3 = model_file("one-axis-table2.3.yaml")
 #: The two fitted pulses of ``datasets/realistic`` (5V_oneaxis.mcap, 10V_oneaxis.mcap): motor 1
@@ -73,13 +77,6 @@ def pulse_recordings(plant: Plant, noise_seed: int) -> list[Recording]:
         record_realistic(plant, protocol, seed=1000 * noise_seed + i)
         for i, protocol in enumerate(PULSES)
     ]
-
-
-def parse_latency(text: str) -> dict[str, int]:
-    """``FitOptions.latency_samples`` from ``CHANNEL=SAMPLES,...`` (``hframe-id fit
-    --latency``'s parsing; samples at 1 kHz: 1 ms each); empty text: none."""
-    pairs = _pairs([item for item in text.split(",") if item.strip()], "--latency")
-    return {name: _samples(value, f"--latency {name}") for name, value in pairs.items()}
 
 
 def run_trial(seed: int, noise_seed: int = 0, options: FitOptions | None = None) -> OneAxisTrial:

@@ -10,9 +10,9 @@ from hframe_id.errors import OptionError
 from hframe_id.parameters import load_parameter_file
 from hframe_id.resources import datasets_dir
 from hframe_id.studies import mismatch_one_axis
+from hframe_id.studies.mismatch import parse_latency
 from hframe_id.studies.mismatch_one_axis import (
     HELD_OUT,
-    parse_latency,
     plant_for,
     pulse_recordings,
     run_trial,
