@@ -517,12 +517,22 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
 
 def _warm_solve(ms, nodes, theta, active, stages, counter, progress, label):
     """Every window, exact continuity, from given nodes and parameters, monotone (no step
-    may raise the merit: a warm start is kept, not thrown away by free steps)."""
+    may raise the merit: a warm start is kept, not thrown away by free steps). Used by the
+    noise rounds: with estimated noise levels a stall counts as converged only with its
+    defects at ``defect_tol`` (or closed by simulation), see ``GaussNewton.run``."""
     ms = ms.uniform()
     gn = GaussNewton(ms, progress, freeze_sloppy=True)
     state = SolverState(nodes.copy(), theta.copy(), active.copy())
     stages.append(
-        _exact_stage(gn, state, label, cost_rtol=WARM_COST_RTOL, radius=0.5, watchdog=False)
+        _exact_stage(
+            gn,
+            state,
+            label,
+            cost_rtol=WARM_COST_RTOL,
+            radius=0.5,
+            watchdog=False,
+            stall_defect_tol=ms.problem.options.defect_tol,
+        )
     )
     counter["evaluations"] += gn.evaluations
     return state, gn
