@@ -20,11 +20,12 @@ import argparse
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from hframe_id.errors import OptionError
-from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting import FitOptions, FitResult, fit_recordings
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import model_file
@@ -119,6 +120,26 @@ def training_criterion(params: ParameterSet, recordings: list[Recording]) -> flo
     return sum(n * 0.5 * np.log(squares[k] / n) for k, n in counts.items())
 
 
+def fit_and_record_held_out(
+    plant: Plant,
+    training: list[Recording],
+    start_file: Path,
+    held_out: dict,
+    noise_seed: int,
+    options: FitOptions | None,
+) -> tuple[FitResult, float, dict[str, Recording]]:
+    """The fit of ``training`` from ``start_file``, its wall time [s], and the held-out
+    protocols recorded from ``plant`` (sensor seed 10000 + ``noise_seed``)."""
+    start = time.perf_counter()
+    result = fit_recordings(training, load_parameter_file(start_file), options)
+    wall = time.perf_counter() - start
+    recordings = {
+        name: record_realistic(plant, protocol, seed=10_000 + noise_seed)
+        for name, protocol in held_out.items()
+    }
+    return result, wall, recordings
+
+
 def run_trial(
     seed: int, noise_seed: int = 0, options: FitOptions | None = None, train: str = "steps"
 ) -> MismatchTrial:
@@ -126,13 +147,9 @@ def run_trial(
     held-out recordings (``HELD_OUT``)."""
     plant = plant_for(seed)
     training = training_recordings(plant, noise_seed, train)
-    start = time.perf_counter()
-    result = fit_recordings(training, load_parameter_file(TABLE_4_2), options)
-    wall = time.perf_counter() - start
-    held_out = {
-        name: record_realistic(plant, protocol, seed=10_000 + noise_seed)
-        for name, protocol in HELD_OUT.items()
-    }
+    result, wall, held_out = fit_and_record_held_out(
+        plant, training, TABLE_4_2, HELD_OUT, noise_seed, options
+    )
     return MismatchTrial(
         seed=seed,
         train=train,
@@ -198,6 +215,16 @@ def parse_latency(text: str) -> dict[str, int]:
     return latency
 
 
+def add_latency_argument(parser: argparse.ArgumentParser, shipped: str) -> None:
+    """``--latency`` (text for ``parse_latency``); ``shipped``: the shipped plant's value."""
+    parser.add_argument(
+        "--latency",
+        default="",
+        help="FitOptions.latency_samples as CHANNEL=SAMPLES,... (the shipped plant: one "
+        f"sample of actuation delay and two of laser latency: {shipped})",
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -211,12 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         default="steps",
         help="training set: the six steps, or the steps and a 3 V multisine (phase seed 1)",
     )
-    parser.add_argument(
-        "--latency",
-        default="",
-        help="FitOptions.latency_samples as CHANNEL=SAMPLES,... (the shipped plant: one "
-        "sample of actuation delay and two of laser latency: phi1=1,phi2=1,x=3,y=3)",
-    )
+    add_latency_argument(parser, "phi1=1,phi2=1,x=3,y=3")
     args = parser.parse_args(argv)
     options = FitOptions(latency_samples=parse_latency(args.latency))
     for seed in args.seeds:

@@ -24,11 +24,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from dataclasses import dataclass
 
-from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.parameters import load_parameter_file
+from hframe_id.fitting import FitOptions
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import model_file
 from hframe_id.rig.plant import Plant
@@ -36,6 +34,8 @@ from hframe_id.rig.protocols import MultisineProtocol, PulseProtocol
 from hframe_id.rig.realistic import realistic_plant, record_realistic, shipped_plant
 from hframe_id.studies.mismatch import (
     MismatchTrial,
+    add_latency_argument,
+    fit_and_record_held_out,
     parse_latency,
     simulation_fit,
     training_criterion,
@@ -84,13 +84,9 @@ def run_trial(seed: int, noise_seed: int = 0, options: FitOptions | None = None)
     plant's own parameters on the held-out recordings (``HELD_OUT``)."""
     plant = plant_for(seed)
     training = pulse_recordings(plant, noise_seed)
-    start = time.perf_counter()
-    result = fit_recordings(training, load_parameter_file(TABLE_2_3), options)
-    wall = time.perf_counter() - start
-    held_out = {
-        name: record_realistic(plant, protocol, seed=10_000 + noise_seed)
-        for name, protocol in HELD_OUT.items()
-    }
+    result, wall, held_out = fit_and_record_held_out(
+        plant, training, TABLE_2_3, HELD_OUT, noise_seed, options
+    )
     own = plant.reference()
     return OneAxisTrial(
         seed=seed,
@@ -132,12 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="*", default=[-1], help="plants (-1 shipped)")
-    parser.add_argument(
-        "--latency",
-        default="",
-        help="FitOptions.latency_samples as CHANNEL=SAMPLES,... (the shipped plant: one "
-        "sample of actuation delay and two of laser latency: phi1=1,x=3)",
-    )
+    add_latency_argument(parser, "phi1=1,x=3")
     args = parser.parse_args(argv)
     options = FitOptions(latency_samples=parse_latency(args.latency))
     for seed in args.seeds:
