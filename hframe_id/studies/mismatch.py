@@ -215,10 +215,20 @@ def parse_latency(text: str) -> dict[str, int]:
     return latency
 
 
+def _latency_argument(text: str) -> dict[str, int]:
+    """``parse_latency`` for argparse: a malformed value is a usage error, not a traceback."""
+    try:
+        return parse_latency(text)
+    except OptionError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def add_latency_argument(parser: argparse.ArgumentParser, shipped: str) -> None:
-    """``--latency`` (text for ``parse_latency``); ``shipped``: the shipped plant's value."""
+    """``--latency``, parsed into ``FitOptions.latency_samples``; ``shipped``: the shipped
+    plant's value, for the help."""
     parser.add_argument(
         "--latency",
+        type=_latency_argument,
         default="",
         help="FitOptions.latency_samples as CHANNEL=SAMPLES,... (the shipped plant: one "
         f"sample of actuation delay and two of laser latency: {shipped})",
@@ -240,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     add_latency_argument(parser, "phi1=1,phi2=1,x=3,y=3")
     args = parser.parse_args(argv)
-    options = FitOptions(latency_samples=parse_latency(args.latency))
+    options = FitOptions(latency_samples=args.latency)
     for seed in args.seeds:
         print(_line(run_trial(seed, options=options, train=args.train)), flush=True)
     if args.noise_seeds:

@@ -36,7 +36,6 @@ from hframe_id.studies.mismatch import (
     MismatchTrial,
     add_latency_argument,
     fit_and_record_held_out,
-    parse_latency,
     simulation_fit,
     training_criterion,
 )
@@ -130,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="*", default=[-1], help="plants (-1 shipped)")
     add_latency_argument(parser, "phi1=1,x=3")
     args = parser.parse_args(argv)
-    options = FitOptions(latency_samples=parse_latency(args.latency))
+    options = FitOptions(latency_samples=args.latency)
     for seed in args.seeds:
         print(_line(run_trial(seed, options=options)), flush=True)
     return 0
