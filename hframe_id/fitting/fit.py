@@ -172,6 +172,11 @@ class FitResult:
         return self.parameters.variant
 
     @property
+    def has_jackknife(self) -> bool:
+        """Whether a cross-validation gave any parameter its jackknife interval."""
+        return any(est.jackknife_ci95 for est in self.estimates.values())
+
+    @property
     def residual_rms(self) -> float:
         """Residual rms over the valid samples in units of the channels' noise std (about
         1 for a correct model on sim-rig data)."""
@@ -205,7 +210,7 @@ class FitResult:
         """A one-screen table: parameter, initial, fitted, 95 % interval, the jackknife's
         95 % interval (after a cross-validation), status (identified, held, at bound, poorly
         determined); then the verdict line."""
-        jackknife = any(est.jackknife_ci95 for est in self.estimates.values())
+        jackknife = self.has_jackknife
         extra = f" {'jackknife 95 % interval':>25}" if jackknife else ""
         lines = [
             f"{'parameter':<22} {'initial':>11} {'fitted':>11} {'95 % interval':>25}{extra}  status"

@@ -192,7 +192,7 @@ def parameter_table(
         "vs reference",
         "identified",
     )
-    jackknife = any(est.jackknife_ci95 for est in result.estimates.values())
+    jackknife = result.has_jackknife
     if jackknife:
         header = header[:4] + ("95 % interval, experiments (jackknife)",) + header[4:]
     if truth:
@@ -484,7 +484,7 @@ def _report_lines(
         intro += f" {truth_note}"
     else:
         intro += "." + (f" {truth_note}" if truth_note else "")
-    if any(est.jackknife_ci95 for est in result.estimates.values()):
+    if result.has_jackknife:
         intro += (
             " Two 95 % intervals: the fit's (noise, robust to correlated residuals, with any "
             "held parameter's prior) and the experiments' (delete-one-recording jackknife, "
