@@ -10,8 +10,14 @@ recordings (``HELD_OUT``, the same for every training set; simulation fit in per
 channel, ``hframe_id.validation``). Also the coverage under mismatch: over noise seeds of one
 plant, how often each 95 % interval holds the across-seed mean estimate.
 
+Another model than hframe-8 (``--model-file``, a user model, docs/custom-models.md; started
+from ``--initial``, by default the model's reference file) is judged against the reduction as
+above and against the reduction in that model (``reduction_in_model``: for the current-limited
+hframe-8, I_max the plant's amplifier limit).
+
     python -m hframe_id.studies.mismatch --seeds 0 1 2 --noise-seeds 0 1 2 3 4
     python -m hframe_id.studies.mismatch --train multisine --seeds -1 0 1
+    python -m hframe_id.studies.mismatch --model-file models/hframe8_current_limit.py --seeds -1
 """
 
 from __future__ import annotations
@@ -24,8 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hframe_id.errors import OptionError
+from hframe_id.errors import HframeIdError, OptionError
 from hframe_id.fitting import FitOptions, FitResult, fit_recordings
+from hframe_id.models import declaration, load_model_file
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import model_file
@@ -78,6 +85,11 @@ class MismatchTrial:
     #: concentrated log-likelihood on the training set (``training_criterion``): the fit's,
     #: the reduction's (lower is better)
     criterion: tuple[float, float]
+    at_bound: tuple[str, ...] = ()  # free parameters the box stopped (``est.at_bound``)
+    #: another model than hframe-8 (``--model-file``): the held-out fit and the criterion of
+    #: the reduction in that model (``reduction_in_model``); None for hframe-8
+    model_reference_fit: dict[str, dict[str, float]] | None = None
+    model_reference_criterion: float | None = None
 
 
 def plant_for(seed: int) -> Plant:
@@ -140,16 +152,33 @@ def fit_and_record_held_out(
     return result, wall, recordings
 
 
+def reduction_in_model(plant: Plant, start: ParameterSet) -> ParameterSet:
+    """The plant's reduction (``plant.reference()``) in the model of ``start``: its values, an
+    ``I_max`` the plant's amplifier current limit, any other parameter ``start``'s."""
+    values = {k: v for k, v in plant.reference().values.items() if k in start.values}
+    if "I_max" in start.values:
+        values["I_max"] = plant.constants.current_limit_a
+    return start.replace_values(**values)
+
+
 def run_trial(
-    seed: int, noise_seed: int = 0, options: FitOptions | None = None, train: str = "steps"
+    seed: int,
+    noise_seed: int = 0,
+    options: FitOptions | None = None,
+    train: str = "steps",
+    start: Path = TABLE_4_2,
 ) -> MismatchTrial:
-    """Fit one realistic plant's training set ``train`` from Table 4.2 and judge it on the
-    held-out recordings (``HELD_OUT``)."""
+    """Fit one realistic plant's training set ``train`` from the parameter file ``start``
+    (Table 4.2) and judge it on the held-out recordings (``HELD_OUT``); a model other than
+    hframe-8 also against the reduction in that model (``reduction_in_model``)."""
     plant = plant_for(seed)
     training = training_recordings(plant, noise_seed, train)
     result, wall, held_out = fit_and_record_held_out(
-        plant, training, TABLE_4_2, HELD_OUT, noise_seed, options
+        plant, training, start, HELD_OUT, noise_seed, options
     )
+    own = None
+    if result.parameters.variant != plant.reference().variant:
+        own = reduction_in_model(plant, load_parameter_file(start))
     return MismatchTrial(
         seed=seed,
         train=train,
@@ -167,6 +196,11 @@ def run_trial(
             training_criterion(result.parameters, training),
             training_criterion(plant.reference(), training),
         ),
+        at_bound=tuple(name for name, est in result.estimates.items() if est.at_bound),
+        model_reference_fit=None
+        if own is None
+        else {n: simulation_fit(own, r) for n, r in held_out.items()},
+        model_reference_criterion=None if own is None else training_criterion(own, training),
     )
 
 
@@ -184,14 +218,22 @@ def coverage_of_mean(trials: list[MismatchTrial]) -> float:
 
 
 def _line(t: MismatchTrial) -> str:
+    fits = [t.held_out_fit, t.reference_fit]
+    criteria = list(t.criterion)
+    columns = "fitted/reduction"
+    if t.model_reference_fit is not None:
+        fits.append(t.model_reference_fit)
+        criteria.append(t.model_reference_criterion)
+        columns += "/reduction in the fitted model"
     channels = "; ".join(
-        f"{name}: " + ", ".join(f"{k} {fits[k]:.1f}/{t.reference_fit[name][k]:.1f} %" for k in fits)
-        for name, fits in t.held_out_fit.items()
+        f"{name}: "
+        + ", ".join(f"{k} " + "/".join(f"{f[name][k]:.1f}" for f in fits) + " %" for k in ks)
+        for name, ks in t.held_out_fit.items()
     )
     return (
-        f"seed {t.seed:3d} train={t.train} success={t.success} defect {t.max_defect:.1e} std "
-        f"time {t.wall_time_s:.1f} s training criterion (fitted/reduction) "
-        f"{t.criterion[0]:.1f}/{t.criterion[1]:.1f}; held-out fit (fitted/reduction): "
+        f"seed {t.seed:3d} train={t.train} success={t.success} at_bound=[{','.join(t.at_bound)}] "
+        f"defect {t.max_defect:.1e} std time {t.wall_time_s:.1f} s training criterion "
+        f"({columns}) {'/'.join(f'{c:.1f}' for c in criteria)}; held-out fit ({columns}): "
         f"{channels}; {t.message}"
     )
 
@@ -235,6 +277,14 @@ def add_latency_argument(parser: argparse.ArgumentParser, shipped: str) -> None:
     )
 
 
+def _model_file_argument(path: str) -> str:
+    """``load_model_file`` for argparse (the variant name): a bad file is a usage error."""
+    try:
+        return load_model_file(path).name
+    except HframeIdError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -249,13 +299,35 @@ def main(argv: list[str] | None = None) -> int:
         help="training set: the six steps, or the steps and a 3 V multisine (phase seed 1)",
     )
     add_latency_argument(parser, "phi1=1,phi2=1,x=3,y=3")
+    parser.add_argument(
+        "--model-file",
+        type=_model_file_argument,
+        metavar="FILE.py",
+        help="fit this user model (docs/custom-models.md) instead of hframe-8",
+    )
+    parser.add_argument(
+        "--initial",
+        type=Path,
+        metavar="FILE.yaml",
+        help="start parameter file (default: Table 4.2; with --model-file its reference file)",
+    )
     args = parser.parse_args(argv)
+    start = args.initial or (
+        declaration(args.model_file).reference_file if args.model_file else TABLE_4_2
+    )
+    try:
+        variant = load_parameter_file(start).variant
+    except HframeIdError as err:
+        parser.error(f"--initial: {err}")
+    if args.model_file and variant != args.model_file:
+        parser.error(f"--initial {start} is a {variant} file, --model-file's is {args.model_file}")
     options = FitOptions(latency_samples=args.latency)
     for seed in args.seeds:
-        print(_line(run_trial(seed, options=options, train=args.train)), flush=True)
+        print(_line(run_trial(seed, options=options, train=args.train, start=start)), flush=True)
     if args.noise_seeds:
         trials = [
-            run_trial(-1, noise_seed=s, options=options, train=args.train) for s in args.noise_seeds
+            run_trial(-1, noise_seed=s, options=options, train=args.train, start=start)
+            for s in args.noise_seeds
         ]
         for t in trials:
             print(_line(t), flush=True)

@@ -49,3 +49,43 @@ def test_training_criterion_prefers_the_parameters_that_made_the_data():
     recording = simulate_recording(table, u, seed=2)
     stiffer = table.replace_values(k_l=1.5 * table.values["k_l"])
     assert training_criterion(table, [recording]) < training_criterion(stiffer, [recording])
+
+
+def test_model_file_and_initial_reach_the_trials(monkeypatch):
+    """--model-file registers the user model; the start defaults to its reference file, and
+    --initial names another; without either, Table 4.2 as before."""
+    from hframe_id.resources import models_dir
+
+    calls = []
+    monkeypatch.setattr(mismatch, "run_trial", lambda seed, **kw: calls.append((seed, kw)))
+    monkeypatch.setattr(mismatch, "_line", lambda trial: "trial")
+    model = str(models_dir() / "hframe8_current_limit.py")
+    initial = models_dir() / "hframe-8-current-limit.yaml"
+    assert mismatch.main(["--model-file", model, "--seeds", "0"]) == 0
+    assert mismatch.main(["--model-file", model, "--initial", str(initial), "--seeds", "1"]) == 0
+    assert mismatch.main(["--seeds", "2"]) == 0
+    assert [(seed, kw["start"].resolve()) for seed, kw in calls] == [
+        (0, initial.resolve()),
+        (1, initial.resolve()),
+        (2, mismatch.TABLE_4_2.resolve()),
+    ]
+
+
+def _bad_options():
+    from hframe_id.resources import models_dir
+
+    model = str(models_dir() / "hframe8_current_limit.py")
+    return [
+        (["--model-file", "no/such/model.py"], "argument --model-file: model file"),
+        (["--initial", "no/such/start.yaml"], "--initial: "),
+        (["--model-file", model, "--initial", str(mismatch.TABLE_4_2)], "is a hframe-8 file"),
+    ]
+
+
+@pytest.mark.parametrize(("argv", "message"), _bad_options())
+def test_bad_model_file_or_initial_is_a_one_line_usage_error(argv, message, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        mismatch.main([*argv, "--seeds", "0"])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert message in error.strip().splitlines()[-1] and "Traceback" not in error
