@@ -177,34 +177,57 @@ class FitResult:
         return any(est.jackknife_ci95 for est in self.estimates.values())
 
     @property
+    def prior_names(self) -> tuple[str, ...]:
+        """Free parameters estimated with a prior (``FitOptions.consider_method`` "prior")."""
+        return tuple(self.diagnostics.get("consider", {}).get("prior_relative_std", {}))
+
+    @property
     def residual_rms(self) -> float:
         """Residual rms over the valid samples in units of the channels' noise std (about
         1 for a correct model on sim-rig data)."""
         return float(self.diagnostics.get("residual_rms_noise_std", math.nan))
 
     def held_statement(self) -> str | None:
-        """What the intervals assume about held parameters (None if nothing is held with a
-        prior): which parameters, at which values, with which prior relative std."""
-        prior = self.diagnostics.get("consider", {}).get("held_relative_std", {})
-        if not prior:
-            return None
-        held = ", ".join(
-            f"{name} = {self.parameters.values[name]:.4g} (+/-{100 * std:.0f} %)"
-            for name, std in prior.items()
-        )
-        how = {
-            "linear": "consider covariance, linearised at the optimum",
-            "refit": "the spread of whole refits with each held value at exp(+/-std) of itself",
-        }[self.diagnostics["consider"].get("method", "linear")]
-        failed = self.diagnostics["consider"].get("failed_refits", [])
-        caveat = (
-            f" {len(failed)} of the refits did not converge: {'; '.join(failed)}." if failed else ""
-        )
-        return (
-            f"Held at the initial file's values, not fitted: {held}. The intervals include "
-            f"this prior uncertainty of the held values ({how}); they do not assume the held "
-            f"values are exact.{caveat}"
-        )
+        """What the intervals assume about held parameters (None if nothing is held or
+        estimated with a prior): which parameters, at which values, with which prior
+        relative std, and how the prior entered."""
+        consider = self.diagnostics.get("consider", {})
+        prior = consider.get("held_relative_std", {})
+        estimated = consider.get("prior_relative_std", {})
+        sentences = []
+        if estimated:
+            listed = ", ".join(
+                f"{name} (start {self.initial.values[name]:.4g}, +/-{100 * std:.0f} %)"
+                for name, std in estimated.items()
+            )
+            sentences.append(
+                f"Estimated with a prior on the initial file's values (maximum a posteriori; "
+                f"Gaussian in log p): {listed}. Their intervals, and the others', are the "
+                f"posterior's: data and prior together."
+            )
+        if prior:
+            held = ", ".join(
+                f"{name} = {self.parameters.values[name]:.4g} (+/-{100 * std:.0f} %)"
+                for name, std in prior.items()
+            )
+            method = consider.get("method", "linear")
+            how = (
+                "the spread of whole refits with each held value at exp(+/-std) of itself"
+                if method == "refit"
+                else "consider covariance, linearised at the optimum"
+            )
+            failed = consider.get("failed_refits", [])
+            caveat = (
+                f" {len(failed)} of the refits did not converge: {'; '.join(failed)}."
+                if failed
+                else ""
+            )
+            sentences.append(
+                f"Held at the initial file's values, not fitted: {held}. The intervals include "
+                f"this prior uncertainty of the held values ({how}); they do not assume the "
+                f"held values are exact.{caveat}"
+            )
+        return " ".join(sentences) or None
 
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted, 95 % interval, the jackknife's
@@ -228,6 +251,8 @@ class FitResult:
                 status = "NOT identified (held)"
             else:
                 status = f"poorly determined (relative std {est.relative_std:.0%})"
+            if est.name in self.prior_names:
+                status += ", with a prior"
             if jackknife:
                 ci = est.jackknife_ci95
                 extra = f" [{ci[0]:>10.5g}, {ci[1]:>10.5g}]" if ci else f" {'n/a':>25}"
@@ -395,7 +420,14 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
         prior = dict(options.consider)
     p = problem.parameters(state.theta)
     held = [n for n in names if n in prior and n not in result.free_names and p[names.index(n)]]
-    result.diagnostics["consider"] = {"held_relative_std": {n: prior[n] for n in held}}
+    result.diagnostics["consider"] = {
+        "held_relative_std": {n: prior[n] for n in held},
+        "prior_relative_std": {
+            n: float(1.0 / w)
+            for n, w in zip(problem.free_names, problem.prior_weight, strict=True)
+            if w > 0
+        },
+    }
     if not held or not result.free_names:
         return
     if options.consider_method == "refit":
@@ -769,12 +801,15 @@ def _hold_unidentified(problem, ms, state, gn, stats, stages, resolve):
         if not stages[-1].converged and ms.residual_rms(state.evaluation.cost) > MISFIT:
             break
         active_idx = np.flatnonzero(state.active)
-        worst = int(np.argmax(stats.relative_std))
-        if stats.relative_std[worst] <= options.identifiability_threshold:
+        # A parameter with a prior (``FitProblem.prior_weight``) is never held: the prior
+        # determines what the data do not.
+        judged = np.where(problem.prior_weight[active_idx] > 0, 0.0, stats.relative_std)
+        worst = int(np.argmax(judged))
+        if judged[worst] <= options.identifiability_threshold:
             break
         # The worst first (fixing one of a collinear pair can identify the other), together
         # with every parameter the data plainly do not determine (relative std > 100 %).
-        hold = {worst} | set(np.flatnonzero(stats.relative_std > HOPELESS_STD).tolist())
+        hold = {worst} | set(np.flatnonzero(judged > HOPELESS_STD).tolist())
         active = state.active.copy()
         theta = state.theta.copy()
         for k in sorted(hold):

@@ -240,6 +240,21 @@ class _Transcription:
         ).ravel()
         self.jac_defects = _sparse(n_link * nx, n_v, rows, cols, g_def, entry)
         self.sens_residual, self.sens_defects = residual, defects
+        self._append_priors(problem, active, theta_active, nx * w)
+
+    def _append_priors(self, problem, active: np.ndarray, theta_active, offset: int) -> None:
+        """Rows w (theta - mean) of the active parameters' priors (``FitProblem.prior_weight``)
+        after the residuals, with their Jacobian (w at the parameter's column)."""
+        weight = problem.prior_weight[active]
+        k = np.flatnonzero(weight)
+        if not k.size:
+            return
+        prior = ca.DM(weight[k]) * (theta_active[k.tolist()] - ca.DM(problem.prior_mean[active][k]))
+        self.residual = ca.vertcat(self.residual, prior)
+        self.sens_residual = ca.vertcat(self.sens_residual, prior)
+        n_v = self.variables.shape[0]
+        rows = ca.Sparsity.triplet(k.size, n_v, list(range(k.size)), (offset + k).tolist())
+        self.jac_residual = ca.vertcat(self.jac_residual, ca.MX(ca.DM(rows, weight[k])))
 
     def nlpsol(self, settings: NlpSettings) -> ca.Function:
         """The solver: objective 1/2 |r|^2, constraints the defects, derivatives from the

@@ -23,7 +23,7 @@ UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
 SOLVERS = ("gauss-newton", "ipopt")
 CONTINUITY = ("exact", "none")
-CONSIDER_METHODS = ("linear", "refit")
+CONSIDER_METHODS = ("linear", "refit", "prior")
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,8 @@ def _positive(name: str, value: Any, integer: bool = False) -> None:
 @dataclass(frozen=True)
 class ProblemOptions:
     """What is estimated, from what: the parts of ``FitOptions`` that ``build_problem`` reads
-    (free set, bounds, channel weights and latencies, Coulomb smoothing)."""
+    (free set, bounds, channel weights and latencies, Coulomb smoothing, and the held
+    parameters' priors where they enter the cost)."""
 
     free: tuple[str, ...] | None
     fix: tuple[str, ...]
@@ -58,6 +59,8 @@ class ProblemOptions:
     channel_std: Mapping[str, float]
     latency_samples: Mapping[str, int]
     smoothing: tuple[float, float] | None
+    consider: Mapping[str, float] | None
+    consider_method: str
 
 
 @dataclass(frozen=True)
@@ -132,9 +135,12 @@ class FitOptions:
         the declaration's ``held`` table values and any parameter held for
         identifiability, each at ``HELD_PRIOR_RELATIVE_STD``; ``{}``: held values exact.
     consider_method : how the held priors enter: ``"linear"`` (the consider covariance
-        linearised at the optimum) or ``"refit"`` (two warm-started refits per held
-        parameter, at exp(+/-sigma) times its value: the secant, for effects that are not
-        linear).
+        linearised at the optimum), ``"refit"`` (two whole refits per held parameter, at
+        exp(+/-sigma) times its value: the secant, for effects that are not linear) or
+        ``"prior"`` (the held parameters are estimated with their prior as a Gaussian
+        penalty on log p, centred on the start value: a maximum a posteriori fit, whose
+        intervals are the posterior's; parameters held later for identifiability still get
+        the linear consider covariance).
     solver : the solver of the all-window stages: ``"gauss-newton"`` (default: the condensed
         Gauss-Newton of ``hframe_id.fitting.solver``) or ``"ipopt"`` (CasADi ``nlpsol`` with
         an exact Gauss-Newton Hessian on the same transcription, ``hframe_id.fitting.nlp``;

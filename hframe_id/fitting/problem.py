@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.options import FitOptions, ProblemOptions
+from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -77,6 +77,10 @@ class FitProblem:
     sample_period_s: float
     smoothing: tuple[float, float]
     options: FitOptions
+    #: (n_f,) weight 1 / sigma of each free parameter's Gaussian prior on theta (0: none;
+    #: ``FitOptions.consider_method`` "prior"), and its mean in theta (the start value: 0)
+    prior_weight: np.ndarray
+    prior_mean: np.ndarray
 
     @property
     def free_names(self) -> tuple[str, ...]:
@@ -87,6 +91,11 @@ class FitProblem:
     def output_names(self) -> tuple[str, ...]:
         """Names of the model's outputs (the residual channels)."""
         return tuple(s.name for s in self.model.outputs)
+
+    @property
+    def prior_names(self) -> tuple[str, ...]:
+        """Free parameters estimated with a prior (``FitOptions.consider_method`` "prior")."""
+        return tuple(n for n, w in zip(self.free_names, self.prior_weight, strict=True) if w > 0)
 
     @property
     def signed(self) -> np.ndarray:
@@ -162,6 +171,24 @@ def resolve_free(model: Model, options: ProblemOptions) -> list[str]:
     if not free:
         raise FitError("no free parameters left after --fix; nothing to fit")
     return free
+
+
+def held_priors(model: Model, options: ProblemOptions) -> dict[str, float]:
+    """``{name: relative std}`` of the held parameters estimated with a prior: with
+    ``consider_method`` "prior", ``options.consider`` (default: the declaration's ``held``
+    parameters at ``HELD_PRIOR_RELATIVE_STD``) without those ``options.fix`` names; else none."""
+    if options.consider_method != "prior":
+        return {}
+    names = list(model.parameter_names)
+    if options.consider is None:
+        priors = {n: HELD_PRIOR_RELATIVE_STD for n in model.declaration.held if n in names}
+    else:
+        unknown = [n for n in options.consider if n not in names]
+        if unknown:
+            raise FitError(f"consider: unknown parameter(s) {', '.join(unknown)}")
+        priors = dict(options.consider)
+    fixed = _expand(options.fix, names, "fix") if options.fix else []
+    return {n: s for n, s in priors.items() if n not in fixed}
 
 
 def rig_dac(rig: dict) -> SensorModel | None:
@@ -336,6 +363,9 @@ def build_problem(
     p0 = model.parameter_vector(initial.values)
     names = list(model.parameter_names)
     free_names = resolve_free(model, wanted)
+    priors = held_priors(model, wanted)
+    if set(priors) - set(free_names):
+        free_names = [n for n in names if n in free_names or n in priors]
     for name in wanted.bounds:
         if name not in names:
             raise FitError(f"bounds: unknown parameter {name!r}{_suggest(name, names)}")
@@ -423,6 +453,8 @@ def build_problem(
         sample_period_s=float(recordings[0].sample_period_s),
         smoothing=(float(smoothing[0]), float(smoothing[1])),
         options=options,
+        prior_weight=np.array([1.0 / priors[n] if n in priors else 0.0 for n in free_names]),
+        prior_mean=np.zeros(len(free_names)),
     )
 
 

@@ -213,6 +213,8 @@ def parameter_table(
             status = "**no** (held at initial)"
         else:
             status = "poorly determined (kept at estimate)"
+        if est.name in result.prior_names:
+            status += ", with a prior"
         cells = (
             est.key,
             _fmt(ref) if ref is not None else "n/a",

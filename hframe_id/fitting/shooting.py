@@ -58,11 +58,15 @@ class Evaluation:
     states: np.ndarray  # (W, M + 1, n_x) states at the window's samples and its end
     n_substeps: tuple[int, int]  # (fast, stiff)
     n_stiff_windows: int
+    #: (n_f,) residuals of the free parameters' priors, w (theta - mean) (0: no prior)
+    prior_residual: np.ndarray | None = None
 
     @property
     def cost(self) -> float:
-        """0.5 |r|^2 of the weighted residuals (chi^2 / 2 with the noise-model weights)."""
-        return 0.5 * float(np.sum(self.residual**2))
+        """0.5 |r|^2 of the weighted residuals (chi^2 / 2 with the noise-model weights), the
+        priors' residuals included."""
+        prior = 0.0 if self.prior_residual is None else float(np.sum(self.prior_residual**2))
+        return 0.5 * (float(np.sum(self.residual**2)) + prior)
 
 
 class MultipleShooting:
@@ -427,11 +431,13 @@ class MultipleShooting:
         stiff = self._integrate_split(todo, nodes, p, smoothing, plan, velocity_hint, out)
         t = slice(None) if windows is None else todo
         parts = self._residuals(nodes, p, t, out, derivatives)
+        prior = self.problem.prior_weight * (np.asarray(theta) - self.problem.prior_mean)
         if windows is None:
             return Evaluation(
                 **parts,
                 n_substeps=(plan["fast"], plan["stiff"]),
                 n_stiff_windows=int(stiff.sum()),
+                prior_residual=prior,
             )
         merged = {}
         for name, value in parts.items():
@@ -445,6 +451,7 @@ class MultipleShooting:
             **merged,
             n_substeps=(plan["fast"], plan["stiff"]),
             n_stiff_windows=base.n_stiff_windows,
+            prior_residual=prior,
         )
 
     def _stage_plan(self, plan: dict) -> dict:

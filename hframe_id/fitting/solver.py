@@ -271,13 +271,35 @@ class GaussNewton:
 
         return h_red, g_red, complete
 
+    def _with_prior(self, ev: Evaluation, free: np.ndarray, linearized, exact: bool):
+        """The reduced model ``linearized`` = (h, g, complete) of a linearisation with the
+        free parameters' prior residuals w (theta - mean) added (``FitProblem.prior_weight``):
+        h + diag(w^2), g + w r, and their change along a step."""
+        h_red, g_red, complete = linearized
+        w = self.problem.prior_weight[free]
+        if not np.any(w):
+            return linearized
+        r = ev.prior_residual[free]
+
+        def complete_with_prior(dtheta_free):
+            dnodes, change = complete(dtheta_free)
+            wd = w * dtheta_free
+            linear, quadratic = float(r @ wd), float(wd @ wd)
+            if exact:
+                rjd, jdjd = self.model_terms
+                self.model_terms = (rjd + linear, jdjd + quadratic)
+            return dnodes, change + linear + 0.5 * quadratic
+
+        return h_red + np.diag(w**2), g_red + w * r, complete_with_prior
+
     def condensed_jacobian(self, ev: Evaluation, nodes: np.ndarray, free: np.ndarray):
         """The single-shooting Jacobian at a continuous solution, from the window
         sensitivities chained along each experiment.
 
         Returns (J, r, blocks): J (n_valid, n_x * experiments + n_free) with each
         experiment's initial-state columns first, r the weighted residuals, and blocks
-        (label "experiment:channel", row indices in time order) for the HAC estimator.
+        (label "experiment:channel", row indices in time order) for the HAC estimator; a
+        prior (``FitProblem.prior_weight``) adds a row and a block "prior:name" at the end.
         """
         ms = self.ms
         w, m, ny, nx = ev.jac_node.shape
@@ -324,7 +346,25 @@ class GaussNewton:
                         measured=measured[rows],
                     )
                 )
-        return full[valid], ev.residual[valid], blocks
+        jac, residual = full[valid], ev.residual[valid]
+        # The priors (``FitProblem.prior_weight``) are rows of their own: w on their
+        # parameter's column, Gaussian with unit std in the noise-model bootstrap.
+        w = self.problem.prior_weight[free]
+        for k in np.flatnonzero(w):
+            row = np.zeros((1, jac.shape[1]))
+            row[0, nx * n_exp + k] = w[k]
+            blocks.append(
+                Block(
+                    label=f"prior:{self.problem.free_names[np.flatnonzero(free)[k]]}",
+                    rows=np.array([jac.shape[0]]),
+                    sigma=1.0,
+                    quantization_step=0.0,
+                    measured=np.zeros(1),
+                )
+            )
+            jac = np.vstack([jac, row])
+            residual = np.append(residual, ev.prior_residual[free][k])
+        return jac, residual, blocks
 
     def _linearize_penalty(self, ev: Evaluation, nodes, free: np.ndarray, weight: float):
         """Gauss-Newton model with continuity as weighted residuals (defects in noise units).
@@ -496,12 +536,14 @@ class GaussNewton:
             while radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
                 key = (self.node_damping, self.prox_scale)
                 if damping_used != key:
-                    if penalty is None:
-                        h_red, g_red, complete = self._linearize(ev, state.nodes, free)
-                    else:
-                        h_red, g_red, complete = self._linearize_penalty(
-                            ev, state.nodes, free, penalty
-                        )
+                    linearized = (
+                        self._linearize(ev, state.nodes, free)
+                        if penalty is None
+                        else self._linearize_penalty(ev, state.nodes, free, penalty)
+                    )
+                    h_red, g_red, complete = self._with_prior(
+                        ev, free, linearized, exact=penalty is None
+                    )
                     damping_used = key
                 # Parameters the data do not determine at all (textbook relative std above
                 # SLOPPY_STD) are not moved: along such directions Gauss-Newton steps are
