@@ -252,9 +252,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--consider-method",
         choices=CONSIDER_METHODS,
         default=FitOptions.consider_method,
-        help="how the held parameters' prior uncertainty (+/-20 %%) widens the intervals: "
-        "'linear' at the optimum, or 'refit' (the fit repeated twice per held parameter, at "
-        "its value x exp(+/-0.2): slower, for effects that are not linear)",
+        help="how the held parameters' prior uncertainty (+/-20 %%) enters: 'linear' (held, "
+        "the intervals widened at the optimum), 'refit' (held, the fit repeated twice per held "
+        "parameter at its value x exp(+/-0.2): slower, for effects that are not linear) or "
+        "'prior' (estimated, with the prior as a penalty: maximum a posteriori)",
     )
     parser.add_argument(
         "--threads",
