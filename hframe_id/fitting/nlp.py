@@ -243,13 +243,13 @@ class _Transcription:
         self._append_priors(problem, active, theta_active, nx * w)
 
     def _append_priors(self, problem, active: np.ndarray, theta_active, offset: int) -> None:
-        """Rows w (theta - mean) of the active parameters' priors (``FitProblem.prior_weight``)
+        """Rows w theta of the active parameters' priors (``FitProblem.prior_weight``)
         after the residuals, with their Jacobian (w at the parameter's column)."""
         weight = problem.prior_weight[active]
         k = np.flatnonzero(weight)
         if not k.size:
             return
-        prior = ca.DM(weight[k]) * (theta_active[k.tolist()] - ca.DM(problem.prior_mean[active][k]))
+        prior = ca.DM(weight[k]) * theta_active[k.tolist()]
         self.residual = ca.vertcat(self.residual, prior)
         self.sens_residual = ca.vertcat(self.sens_residual, prior)
         n_v = self.variables.shape[0]

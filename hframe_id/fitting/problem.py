@@ -77,10 +77,10 @@ class FitProblem:
     sample_period_s: float
     smoothing: tuple[float, float]
     options: FitOptions
-    #: (n_f,) weight 1 / sigma of each free parameter's Gaussian prior on theta (0: none;
-    #: ``FitOptions.consider_method`` "prior"), and its mean in theta (the start value: 0)
+    #: (n_f,) weight 1 / sigma of each free parameter's Gaussian prior on theta, centred on
+    #: the start value (theta = 0): the residual w theta (0: no prior;
+    #: ``FitOptions.consider_method`` "prior")
     prior_weight: np.ndarray
-    prior_mean: np.ndarray
 
     @property
     def free_names(self) -> tuple[str, ...]:
@@ -454,7 +454,6 @@ def build_problem(
         smoothing=(float(smoothing[0]), float(smoothing[1])),
         options=options,
         prior_weight=np.array([1.0 / priors[n] if n in priors else 0.0 for n in free_names]),
-        prior_mean=np.zeros(len(free_names)),
     )
 
 

@@ -58,7 +58,7 @@ class Evaluation:
     states: np.ndarray  # (W, M + 1, n_x) states at the window's samples and its end
     n_substeps: tuple[int, int]  # (fast, stiff)
     n_stiff_windows: int
-    #: (n_f,) residuals of the free parameters' priors, w (theta - mean) (0: no prior)
+    #: (n_f,) residuals of the free parameters' priors, w theta (0: no prior)
     prior_residual: np.ndarray | None = None
 
     @property
@@ -431,7 +431,7 @@ class MultipleShooting:
         stiff = self._integrate_split(todo, nodes, p, smoothing, plan, velocity_hint, out)
         t = slice(None) if windows is None else todo
         parts = self._residuals(nodes, p, t, out, derivatives)
-        prior = self.problem.prior_weight * (np.asarray(theta) - self.problem.prior_mean)
+        prior = self.problem.prior_weight * np.asarray(theta)
         if windows is None:
             return Evaluation(
                 **parts,

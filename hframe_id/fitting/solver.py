@@ -273,7 +273,7 @@ class GaussNewton:
 
     def _with_prior(self, ev: Evaluation, free: np.ndarray, linearized, exact: bool):
         """The reduced model ``linearized`` = (h, g, complete) of a linearisation with the
-        free parameters' prior residuals w (theta - mean) added (``FitProblem.prior_weight``):
+        free parameters' prior residuals w theta added (``FitProblem.prior_weight``):
         h + diag(w^2), g + w r, and their change along a step."""
         h_red, g_red, complete = linearized
         w = self.problem.prior_weight[free]
