@@ -35,7 +35,6 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from hframe_id.errors import FitError
 from hframe_id.fitting.consider import consider_covariance
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
@@ -44,7 +43,7 @@ from hframe_id.fitting.options import (
     FitOptions,
     FitProgress,
 )
-from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.problem import FitProblem, build_problem, consider_priors
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.statistics import Statistics, compute_statistics
@@ -179,7 +178,7 @@ class FitResult:
     @property
     def prior_names(self) -> tuple[str, ...]:
         """Free parameters estimated with a prior (``FitOptions.consider_method`` "prior")."""
-        return tuple(self.diagnostics.get("consider", {}).get("prior_relative_std", {}))
+        return self.problem.prior_names if self.problem is not None else ()
 
     @property
     def residual_rms(self) -> float:
@@ -193,12 +192,12 @@ class FitResult:
         relative std, and how the prior entered."""
         consider = self.diagnostics.get("consider", {})
         prior = consider.get("held_relative_std", {})
-        estimated = consider.get("prior_relative_std", {})
         sentences = []
-        if estimated:
+        if self.prior_names:
+            weights = dict(zip(self.problem.free_names, self.problem.prior_weight, strict=True))
             listed = ", ".join(
-                f"{name} (start {self.initial.values[name]:.4g}, +/-{100 * std:.0f} %)"
-                for name, std in estimated.items()
+                f"{name} (start {self.initial.values[name]:.4g}, +/-{100 / weights[name]:.0f} %)"
+                for name in self.prior_names
             )
             sentences.append(
                 f"Estimated with a prior on the initial file's values (maximum a posteriori; "
@@ -410,24 +409,12 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
     (``FitOptions.consider``), and records what the intervals assume."""
     options = problem.options
     names = problem.model.parameter_names
+    prior = consider_priors(problem.model, options.consider)
     if options.consider is None:
-        prior = {n: HELD_PRIOR_RELATIVE_STD for n in problem.model.declaration.held if n in names}
         prior.update({n: HELD_PRIOR_RELATIVE_STD for n in result.not_identified})
-    else:
-        unknown = [n for n in options.consider if n not in names]
-        if unknown:
-            raise FitError(f"consider: unknown parameter(s) {', '.join(unknown)}")
-        prior = dict(options.consider)
     p = problem.parameters(state.theta)
     held = [n for n in names if n in prior and n not in result.free_names and p[names.index(n)]]
-    result.diagnostics["consider"] = {
-        "held_relative_std": {n: prior[n] for n in held},
-        "prior_relative_std": {
-            n: float(1.0 / w)
-            for n, w in zip(problem.free_names, problem.prior_weight, strict=True)
-            if w > 0
-        },
-    }
+    result.diagnostics["consider"] = {"held_relative_std": {n: prior[n] for n in held}}
     if not held or not result.free_names:
         return
     if options.consider_method == "refit":

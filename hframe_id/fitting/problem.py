@@ -14,7 +14,7 @@ from __future__ import annotations
 import difflib
 import fnmatch
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -173,21 +173,27 @@ def resolve_free(model: Model, options: ProblemOptions) -> list[str]:
     return free
 
 
+def consider_priors(model: Model, consider: Mapping[str, float] | None) -> dict[str, float]:
+    """``{name: prior relative std}`` of ``FitOptions.consider``: as given, or by default the
+    declaration's ``held`` parameters at ``HELD_PRIOR_RELATIVE_STD``; ``FitError`` for a name
+    the model does not have."""
+    names = list(model.parameter_names)
+    if consider is None:
+        return {n: HELD_PRIOR_RELATIVE_STD for n in model.declaration.held if n in names}
+    unknown = [n for n in consider if n not in names]
+    if unknown:
+        raise FitError(f"consider: unknown parameter(s) {', '.join(unknown)}")
+    return dict(consider)
+
+
 def held_priors(model: Model, options: ProblemOptions) -> dict[str, float]:
     """``{name: relative std}`` of the held parameters estimated with a prior: with
-    ``consider_method`` "prior", ``options.consider`` (default: the declaration's ``held``
-    parameters at ``HELD_PRIOR_RELATIVE_STD``) without those ``options.fix`` names; else none."""
+    ``consider_method`` "prior", the ``consider_priors`` without the ``options.fix`` names;
+    else none."""
     if options.consider_method != "prior":
         return {}
-    names = list(model.parameter_names)
-    if options.consider is None:
-        priors = {n: HELD_PRIOR_RELATIVE_STD for n in model.declaration.held if n in names}
-    else:
-        unknown = [n for n in options.consider if n not in names]
-        if unknown:
-            raise FitError(f"consider: unknown parameter(s) {', '.join(unknown)}")
-        priors = dict(options.consider)
-    fixed = _expand(options.fix, names, "fix") if options.fix else []
+    priors = consider_priors(model, options.consider)
+    fixed = _expand(options.fix, list(model.parameter_names), "fix") if options.fix else []
     return {n: s for n, s in priors.items() if n not in fixed}
 
 
