@@ -156,7 +156,9 @@ def noise_levels(result: FitResult) -> dict[str, Any]:
             "residual_rms [sensor std]": _number(channel["residual_rms_sensor_std"]),
         }
     return {
-        "weights": "estimated from the residuals" if statement else "sensor noise",
+        "weights": (
+            "estimated from the residuals" if noise["method"] == "estimated" else "sensor noise"
+        ),
         "rounds": int(noise["rounds"]),
         "model_mismatch": statement is not None,
         **({"statement": statement} if statement else {}),

@@ -26,7 +26,7 @@ import numpy as np
 
 from hframe_id.atomic import replace_atomically, staged_directory
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
-from hframe_id.fitting.fit import FitResult
+from hframe_id.fitting.fit import MISMATCH_RMS, FitResult
 from hframe_id.fitting.problem import applied_inputs
 from hframe_id.fitting.report_figures import (
     SCALE,
@@ -120,11 +120,15 @@ def output_units(variant: str) -> dict[str, str]:
 
 def mismatch_statement(result: FitResult) -> str | None:
     """A plain sentence saying that the model does not follow the data at the sensors' noise
-    level, or None when the fit weighed its channels by the sensors' noise."""
+    level, or None when the fit weighed its channels by the sensors' noise or, with noise
+    levels estimated (a first solve that stalled above it), still ended within
+    ``MISMATCH_RMS`` sensor std on every channel."""
     noise = result.diagnostics.get("noise")
     if noise is None or noise["method"] != "estimated":
         return None
     ratios = [c["residual_rms_sensor_std"] for c in noise["channels"].values()]
+    if max(ratios) <= MISMATCH_RMS:
+        return None
     span = f"{ratios[0]:.3g}" if len(ratios) == 1 else f"{min(ratios):.3g} to {max(ratios):.3g}"
     return (
         "The model does not follow the data at the sensors' noise level "

@@ -142,3 +142,25 @@ def test_importing_a_report_sets_no_matplotlib_backend(module):
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
     )
     assert done.stdout.split() == ["False", "True"]
+
+
+def test_estimated_noise_that_ends_at_the_sensor_level_states_no_mismatch(mismatched):
+    # A first solve that stalled above the sensors' noise sends the fit to the noise rounds;
+    # if they end within MISMATCH_RMS (3) sensor std on every channel (the shipped one-axis
+    # pulses with the idler under a prior: 0.76 and 1.03), there is no mismatch to state.
+    result, _ = mismatched
+    noise = result.diagnostics["noise"]
+    channels = {
+        name: {**channel, "residual_rms_sensor_std": ratio}
+        for (name, channel), ratio in zip(
+            noise["channels"].items(), (0.76, 1.03, 2.9, 1.0), strict=True
+        )
+    }
+    at_sensor_level = dataclasses.replace(
+        result, diagnostics={**result.diagnostics, "noise": {**noise, "channels": channels}}
+    )
+    assert mismatch_statement(at_sensor_level) is None
+    levels = noise_levels(at_sensor_level)
+    assert levels["model_mismatch"] is False and levels["weights"] == "estimated from the residuals"
+    channels["y"] = {**channels["y"], "residual_rms_sensor_std": 3.1}
+    assert "does not follow the data" in mismatch_statement(at_sensor_level)
