@@ -43,12 +43,16 @@ def fits():
         volts[50:300] = step
         recordings.append(simulate_recording(truth, volts, seed=seed))
     start = truth.replace_values(**{n: 1.2 * truth.values[n] for n in FREE})
-    options = FitOptions(free=FREE)
+    return _both_solvers(recordings, start, FitOptions(free=FREE))
+
+
+def _both_solvers(recordings, start, options):
+    """(transcription, start, the Gauss-Newton fit, IPOPT's outcome from the measured nodes)."""
     gauss_newton = fit_recordings(recordings, start, options)
     problem = build_problem(recordings, start, options)
     ms = MultipleShooting(problem)
     nodes, _ = ms.initial_nodes(problem.p_initial)
-    n_free = len(FREE)
+    n_free = len(problem.free)
     outcome = solve_nlp(ms, nodes, np.zeros(n_free), np.ones(n_free, bool), problem.smoothing)
     return ms, start, gauss_newton, outcome
 
@@ -85,14 +89,9 @@ def test_ipopt_and_gauss_newton_reach_the_same_map_estimate(fits):
     recordings = [e.recording for e in ms.problem.experiments]
     start = start.replace_values(M_bridge=start.values["M_bridge"] / 1.2 * 1.002)
     options = FitOptions(free=FREE, consider_method="prior", consider={"M_bridge": 3e-5})
-    gauss_newton = fit_recordings(recordings, start, options)
-    problem = build_problem(recordings, start, options)
-    map_ms = MultipleShooting(problem)
-    nodes, _ = map_ms.initial_nodes(problem.p_initial)
-    n_free = len(FREE)
-    outcome = solve_nlp(map_ms, nodes, np.zeros(n_free), np.ones(n_free, bool), problem.smoothing)
+    map_ms, _, gauss_newton, outcome = _both_solvers(recordings, start, options)
     assert gauss_newton.success and outcome.converged, (gauss_newton.message, outcome.message)
-    assert problem.prior_names == ("M_bridge",)
+    assert map_ms.problem.prior_names == ("M_bridge",)
     theta_gn = np.log([gauss_newton.parameters.values[n] / start.values[n] for n in FREE])
     assert np.max(np.abs(outcome.theta - theta_gn)) <= THETA_TOL
     assert abs(outcome.cost - gauss_newton.cost) <= COST_TOL
