@@ -350,21 +350,23 @@ class GaussNewton:
         # The priors (``FitProblem.prior_weight``) are rows of their own: w on their
         # parameter's column, Gaussian with unit std in the noise-model bootstrap.
         w = self.problem.prior_weight[free]
-        for k in np.flatnonzero(w):
-            row = np.zeros((1, jac.shape[1]))
-            row[0, nx * n_exp + k] = w[k]
+        prior = np.flatnonzero(w)
+        if not prior.size:
+            return jac, residual, blocks
+        rows = np.zeros((prior.size, jac.shape[1]))
+        rows[np.arange(prior.size), nx * n_exp + prior] = w[prior]
+        free_names = np.array(self.problem.free_names)[free]
+        for i, k in enumerate(prior):
             blocks.append(
                 Block(
-                    label=f"prior:{self.problem.free_names[np.flatnonzero(free)[k]]}",
-                    rows=np.array([jac.shape[0]]),
+                    label=f"prior:{free_names[k]}",
+                    rows=np.array([jac.shape[0] + i]),
                     sigma=1.0,
                     quantization_step=0.0,
                     measured=np.zeros(1),
                 )
             )
-            jac = np.vstack([jac, row])
-            residual = np.append(residual, ev.prior_residual[free][k])
-        return jac, residual, blocks
+        return np.vstack([jac, rows]), np.append(residual, ev.prior_residual[free][prior]), blocks
 
     def _linearize_penalty(self, ev: Evaluation, nodes, free: np.ndarray, weight: float):
         """Gauss-Newton model with continuity as weighted residuals (defects in noise units).
