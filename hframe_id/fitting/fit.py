@@ -899,10 +899,14 @@ def _solve(
         nodes[moving] = sub_state.nodes
         nodes = ms.fill_nodes(nodes, known, theta, smoothing)
     ms = ms.uniform()
-    if prepass and moving.size:
+    if prepass and moving.size and not mismatch:
         # The nodes at rest were simulated with the moving-window parameters, which put an
         # unmeasured pulley's stretch wherever those left it: estimate them again with the
-        # parameters held (docs/fitting.md, "One-axis", the second pre-pass).
+        # parameters held (docs/fitting.md, "One-axis", the second pre-pass). Not under
+        # mismatch: there the pre-pass (continuity a penalty) follows the data with a
+        # discontinuous trajectory, and the noise rounds would estimate the noise from it
+        # (realistic one-axis plant 2: defects of 79 sensor std, noise 33 sensor std where
+        # continuous trajectories are at 0.2-3 rad) and stall (docs/fitting.md).
         nodes, _ = _estimate_states(ms, nodes, velocity, theta, active, stages, progress)
     gn = GaussNewton(ms, progress, freeze_sloppy=True)
     if mismatch:
