@@ -31,7 +31,7 @@ def _sibling(file_name):
     return module
 
 
-#: The one-axis model's smooth limit (its LIMIT_SHARPNESS): one limiter for both models.
+#: The one-axis model's smooth limit (a clip with rounded corners): one limiter for both models.
 limited_current = _sibling("one_axis_current_limit.py").limited_current
 
 #: (coordinate, amplifier gain, input) of each motor.

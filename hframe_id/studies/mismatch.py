@@ -217,24 +217,33 @@ def coverage_of_mean(trials: list[MismatchTrial]) -> float:
     return hits / total
 
 
-def _line(t: MismatchTrial) -> str:
+def comparison_text(t: MismatchTrial, reference: str) -> tuple[str, str]:
+    """The training criteria and the held-out fits of a trial, each as
+    "(fitted/<reference>[/<reference> in the fitted model]) a/b[/c]" text."""
     fits = [t.held_out_fit, t.reference_fit]
     criteria = list(t.criterion)
-    columns = "fitted/reduction"
+    columns = f"fitted/{reference}"
     if t.model_reference_fit is not None:
         fits.append(t.model_reference_fit)
         criteria.append(t.model_reference_criterion)
-        columns += "/reduction in the fitted model"
+        columns += f"/{reference} in the fitted model"
     channels = "; ".join(
         f"{name}: "
-        + ", ".join(f"{k} " + "/".join(f"{f[name][k]:.1f}" for f in fits) + " %" for k in ks)
+        + ", ".join(f"{k} " + "/".join(f"{f[name][k]:.2f}" for f in fits) + " %" for k in ks)
         for name, ks in t.held_out_fit.items()
     )
     return (
+        f"({columns}) {'/'.join(f'{c:.1f}' for c in criteria)}",
+        f"({columns}): {channels}",
+    )
+
+
+def _line(t: MismatchTrial) -> str:
+    criteria, held_out = comparison_text(t, "reduction")
+    return (
         f"seed {t.seed:3d} train={t.train} success={t.success} at_bound=[{','.join(t.at_bound)}] "
         f"defect {t.max_defect:.1e} std time {t.wall_time_s:.1f} s training criterion "
-        f"({columns}) {'/'.join(f'{c:.1f}' for c in criteria)}; held-out fit ({columns}): "
-        f"{channels}; {t.message}"
+        f"{criteria}; held-out fit {held_out}; {t.message}"
     )
 
 
@@ -285,6 +294,38 @@ def _model_file_argument(path: str) -> str:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
+def add_model_arguments(parser: argparse.ArgumentParser, variant: str, table: str) -> None:
+    """``--model-file`` (a user model instead of ``variant``) and ``--initial`` (the start
+    parameter file instead of ``table``); ``start_file`` resolves them."""
+    parser.add_argument(
+        "--model-file",
+        type=_model_file_argument,
+        metavar="FILE.py",
+        help=f"fit this user model (docs/custom-models.md) instead of {variant}",
+    )
+    parser.add_argument(
+        "--initial",
+        type=Path,
+        metavar="FILE.yaml",
+        help=f"start parameter file (default: {table}; with --model-file its reference file)",
+    )
+
+
+def start_file(parser: argparse.ArgumentParser, args: argparse.Namespace, table: Path) -> Path:
+    """The start parameter file of ``add_model_arguments``' options: ``--initial``, else the
+    user model's reference file, else ``table``; one of another model is a usage error."""
+    start = args.initial or (
+        declaration(args.model_file).reference_file if args.model_file else table
+    )
+    try:
+        variant = load_parameter_file(start).variant
+    except HframeIdError as err:
+        parser.error(f"--initial: {err}")
+    if args.model_file and variant != args.model_file:
+        parser.error(f"--initial {start} is a {variant} file, --model-file's is {args.model_file}")
+    return start
+
+
 def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per trial."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -299,28 +340,9 @@ def main(argv: list[str] | None = None) -> int:
         help="training set: the six steps, or the steps and a 3 V multisine (phase seed 1)",
     )
     add_latency_argument(parser, "phi1=1,phi2=1,x=3,y=3")
-    parser.add_argument(
-        "--model-file",
-        type=_model_file_argument,
-        metavar="FILE.py",
-        help="fit this user model (docs/custom-models.md) instead of hframe-8",
-    )
-    parser.add_argument(
-        "--initial",
-        type=Path,
-        metavar="FILE.yaml",
-        help="start parameter file (default: Table 4.2; with --model-file its reference file)",
-    )
+    add_model_arguments(parser, "hframe-8", "Table 4.2")
     args = parser.parse_args(argv)
-    start = args.initial or (
-        declaration(args.model_file).reference_file if args.model_file else TABLE_4_2
-    )
-    try:
-        variant = load_parameter_file(start).variant
-    except HframeIdError as err:
-        parser.error(f"--initial: {err}")
-    if args.model_file and variant != args.model_file:
-        parser.error(f"--initial {start} is a {variant} file, --model-file's is {args.model_file}")
+    start = start_file(parser, args, TABLE_4_2)
     options = FitOptions(latency_samples=args.latency)
     for seed in args.seeds:
         print(_line(run_trial(seed, options=options, train=args.train, start=start)), flush=True)

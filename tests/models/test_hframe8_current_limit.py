@@ -33,8 +33,9 @@ def test_without_a_binding_limit_the_model_is_hframe8():
 
 
 def test_the_8_A_limit_slows_a_6_V_step_but_not_a_2_V_one():
-    """At 0.71 ohm 8 A binds from about 5.7 V: the 6 V step moves less far, the 2 V step
-    (2.8 A) is hframe-8's to the limiter's 0.3 %."""
+    """At 0.71 ohm 8 A binds from about 5.7 V: the 6 V step moves less far (measured: 4 %
+    at the end of the step), the 2 V step (2.8 A, where the limit's correction is 1e-20 A)
+    is hframe-8's to rounding (measured 2e-15 of the largest output)."""
     limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
     plain = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
     x = 2  # output order phi1, phi2, x, y
@@ -43,4 +44,4 @@ def test_the_8_A_limit_slows_a_6_V_step_but_not_a_2_V_one():
     assert abs(slow[299, x]) < 0.99 * abs(fast[299, x])
     _, small_plain = simulate_channels(plain, _step_recording(2.0))
     _, small_limited = simulate_channels(limited, _step_recording(2.0))
-    assert np.abs(small_limited - small_plain).max() <= 1e-9 * np.abs(small_plain).max()
+    assert np.abs(small_limited - small_plain).max() <= 1e-12 * np.abs(small_plain).max()
