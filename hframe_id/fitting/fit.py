@@ -892,9 +892,9 @@ def _solve(
         # stage is evidence of mismatch: one that stalled far from the data may be the
         # idler's multimodal mode from a poor start (a held idler 10-20 % off), which the
         # all-window stages and the restarts along its springs, skipped when deferring,
-        # resolve (held study: coverage 0.793 -> 0.894). Without one, a stalled stage is
-        # taken as mismatch too (realistic hframe-8 plant 1 stalled in the noise rounds
-        # otherwise). docs/fitting.md, "Held parameters".
+        # resolve (held study: coverage 0.793 -> 0.894). Without one (hframe-8), a stalled
+        # stage still counts: the rule was tried there on three realistic plants only,
+        # which it did not improve. docs/fitting.md, "Held parameters".
         mismatch = (
             defer_on_mismatch
             and options.noise != "sensor"
