@@ -161,6 +161,26 @@ def reduction_in_model(plant: Plant, start: ParameterSet) -> ParameterSet:
     return start.replace_values(**values)
 
 
+def reference_in_fitted_model(
+    plant: Plant,
+    start: Path,
+    result: FitResult,
+    training: list[Recording],
+    held_out: dict[str, Recording],
+) -> dict:
+    """``MismatchTrial``'s ``model_reference_fit`` and ``model_reference_criterion``: for a fit
+    in another model than the plant's reference (a user model), the plant's reference in
+    that model (``reduction_in_model``) judged on the held-out and training recordings;
+    None for both otherwise."""
+    if result.parameters.variant == plant.reference().variant:
+        return {"model_reference_fit": None, "model_reference_criterion": None}
+    own = reduction_in_model(plant, load_parameter_file(start))
+    return {
+        "model_reference_fit": {n: simulation_fit(own, r) for n, r in held_out.items()},
+        "model_reference_criterion": training_criterion(own, training),
+    }
+
+
 def run_trial(
     seed: int,
     noise_seed: int = 0,
@@ -176,9 +196,6 @@ def run_trial(
     result, wall, held_out = fit_and_record_held_out(
         plant, training, start, HELD_OUT, noise_seed, options
     )
-    own = None
-    if result.parameters.variant != plant.reference().variant:
-        own = reduction_in_model(plant, load_parameter_file(start))
     return MismatchTrial(
         seed=seed,
         train=train,
@@ -197,10 +214,7 @@ def run_trial(
             training_criterion(plant.reference(), training),
         ),
         at_bound=tuple(name for name, est in result.estimates.items() if est.at_bound),
-        model_reference_fit=None
-        if own is None
-        else {n: simulation_fit(own, r) for n, r in held_out.items()},
-        model_reference_criterion=None if own is None else training_criterion(own, training),
+        **reference_in_fitted_model(plant, start, result, training, held_out),
     )
 
 

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hframe_id.fitting import FitOptions
-from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import model_file
 from hframe_id.rig.plant import Plant
@@ -42,7 +41,7 @@ from hframe_id.studies.mismatch import (
     add_model_arguments,
     comparison_text,
     fit_and_record_held_out,
-    reduction_in_model,
+    reference_in_fitted_model,
     simulation_fit,
     start_file,
     training_criterion,
@@ -99,9 +98,6 @@ def run_trial(
         plant, training, start, HELD_OUT, noise_seed, options
     )
     own = plant.reference()
-    in_model = None
-    if result.parameters.variant != own.variant:
-        in_model = reduction_in_model(plant, load_parameter_file(start))
     return OneAxisTrial(
         seed=seed,
         train="pulses",
@@ -120,12 +116,7 @@ def run_trial(
             training_criterion(own, training),
         ),
         at_bound=tuple(name for name, est in result.estimates.items() if est.at_bound),
-        model_reference_fit=None
-        if in_model is None
-        else {n: simulation_fit(in_model, r) for n, r in held_out.items()},
-        model_reference_criterion=None
-        if in_model is None
-        else training_criterion(in_model, training),
+        **reference_in_fitted_model(plant, start, result, training, held_out),
     )
 
 
