@@ -88,6 +88,7 @@ AT_BOUND_STD = 0.1
 #: (in log) below which the noise levels count as a fixed point.
 MISMATCH_RMS = 3.0
 DEFERRED_STAGE = "all windows: deferred to the noise rounds"
+REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
 #: Warm-started noise rounds also stop once an iteration lowers the cost by less than this
 #: (relative): at their costs (~N / 2 ~ 1e4, N valid samples) that is ~0.01 in chi^2 / 2
 #: units, 1 % of the statistical resolution (1 unit). Without it the monotone trust region
@@ -389,16 +390,19 @@ def fit_recordings(
         )
     sensor_std = problem.channel_std.copy()
     rounds = 0
+    settling = None
     state = best[0]
     mismatch = deferred or ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS
     if options.noise == "estimate" or (options.noise == "auto" and mismatch):
-        problem, ms, best, rounds = _estimate_noise(
+        problem, ms, best, rounds, settling = _estimate_noise(
             problem, ms, best, recordings, stages, counter, progress
         )
     state, gn, stats, held = best
     gn.evaluations = counter["evaluations"]
     result = _result(problem, ms, gn, state, stages, stats, held, start)
-    result.diagnostics["noise"] = _noise_report(problem, sensor_std, result, rounds)
+    result.diagnostics["noise"] = _noise_report(
+        problem, sensor_std, result, rounds, settling
+    )
     _include_held_uncertainty(problem, recordings, state, result)
     result.wall_time_s = time.perf_counter() - start
     return result
@@ -507,17 +511,26 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
     per channel, and the tolerances and acceptance tests in noise units measure against
     what the model can do rather than the sensor (model error is 100-1000x the encoder's
     step on the realistic rig). Parameters held for identifiability are released and
-    not held again. Returns (problem, transcription, (state, solver, statistics, held),
-    rounds).
+    not held again.
+
+    A last round that stalls is rejected, as a trust region rejects a step: the fit is the
+    last converged round's optimum (a real trajectory at its weights), marked by a
+    ``REJECTED_ROUND_STAGE`` stage, with the noise levels reported as not settled. A round
+    before the last that stalls is re-weighted from where it stopped, as before.
+
+    Returns (problem, transcription, (state, solver, statistics, held), rounds, settling),
+    ``settling`` the largest relative change (in log) of a std over the last round and
+    whether that met ``NOISE_RTOL``.
     """
     sensor_std = problem.channel_std
     state = best[0]
     state.active = np.ones(len(problem.free), dtype=bool)
     rounds = 0
     gn = best[1]
+    accepted = None
+    change = math.inf
     for rounds in range(1, MAX_NOISE_ROUNDS + 1):
-        rms = np.array(list(_channel_rms(ms, state.evaluation).values()))
-        std = np.maximum(np.where(np.isfinite(rms), rms, problem.channel_std), sensor_std)
+        std = _noise_levels(ms, state, problem.channel_std, sensor_std)
         change = float(np.max(np.abs(np.log(std / problem.channel_std))))
         if rounds > 1 and change <= NOISE_RTOL and stages[-1].converged:
             rounds -= 1
@@ -533,10 +546,42 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
         state, gn = _warm_solve(
             ms, state.nodes, state.theta, state.active, stages, counter, progress, label
         )
+        if stages[-1].converged:
+            accepted = (problem, ms, state, gn, rounds)
+    else:
+        if not stages[-1].converged and accepted is not None:
+            problem, ms, state, gn, kept = accepted
+            stages.append(_rejected_round_report(stages[-1], kept, ms, state))
+        std = _noise_levels(ms, state, problem.channel_std, sensor_std)
+        change = float(np.max(np.abs(np.log(std / problem.channel_std))))
+    settling = {"change": change, "settled": change <= NOISE_RTOL}
     # No identifiability holds here: holding a parameter at its initial value moves the
     # others away from the best approximation (docs/fitting.md, "Model mismatch"). Poorly
     # determined parameters are reported as such (``_result``), at their estimates.
-    return problem, ms, (state, gn, _stats(gn, state, problem), {}), rounds
+    return problem, ms, (state, gn, _stats(gn, state, problem), {}), rounds, settling
+
+
+def _noise_levels(ms, state, weight_std, sensor_std) -> np.ndarray:
+    """The next round's noise std per channel [SI]: the residual rms at ``state``, floored at
+    the sensor's std (``weight_std`` where a channel has no valid residual)."""
+    rms = np.array(list(_channel_rms(ms, state.evaluation).values()))
+    return np.maximum(np.where(np.isfinite(rms), rms, weight_std), sensor_std)
+
+
+def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageReport:
+    """The stage that records a stalled last noise round rejected and round ``kept``'s
+    optimum taken as the fit."""
+    return StageReport(
+        name=REJECTED_ROUND_STAGE,
+        smoothing=stalled.smoothing,
+        iterations=0,
+        converged=True,
+        message=f"the last noise round did not converge ({stalled.message}); the fit is "
+        f"noise round {kept}'s optimum, its noise levels not settled",
+        cost=state.evaluation.cost,
+        max_defect=float(np.max(np.abs(ms.defects(state.evaluation, state.nodes)), initial=0)),
+        wall_time_s=0.0,
+    )
 
 
 def _warm_solve(ms, nodes, theta, active, stages, counter, progress, label):
@@ -611,13 +656,18 @@ def is_at_bound(theta: float, lower: float, upper: float, relative_std: float) -
     return theta <= lower + near or theta >= upper - near
 
 
-def _noise_report(problem: FitProblem, sensor_std: np.ndarray, result, rounds: int) -> dict:
+def _noise_report(
+    problem: FitProblem, sensor_std: np.ndarray, result, rounds: int, settling: dict | None
+) -> dict:
     """Per channel: the sensor's noise std, the std the fit weighed with, and the residual
-    rms in SI units and in sensor std (the mismatch statement of the report)."""
+    rms in SI units and in sensor std (the mismatch statement of the report); for estimated
+    levels also how far they were from their fixed point (``settling``, see
+    ``_estimate_noise``)."""
     rms = result.diagnostics["channel_rms"]
     return {
         "method": "estimated" if rounds else "sensor",
         "rounds": rounds,
+        **({"settling": settling} if rounds and settling is not None else {}),
         "channels": {
             name: {
                 "sensor_std": float(sensor_std[j]),

@@ -19,6 +19,7 @@ Only a successful fit gets a parameter file: a failed one must not be taken for 
 from __future__ import annotations
 
 import hashlib
+import math
 import subprocess
 from datetime import UTC, datetime
 from pathlib import Path
@@ -160,6 +161,14 @@ def noise_levels(result: FitResult) -> dict[str, Any]:
             "estimated from the residuals" if noise["method"] == "estimated" else "sensor noise"
         ),
         "rounds": int(noise["rounds"]),
+        **(
+            {
+                "levels_settled": bool(noise["settling"]["settled"]),
+                "levels_last_change": _number(math.expm1(noise["settling"]["change"])),
+            }
+            if "settling" in noise
+            else {}
+        ),
         "model_mismatch": statement is not None,
         **({"statement": statement} if statement else {}),
         "channels": channels,

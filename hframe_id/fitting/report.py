@@ -18,6 +18,7 @@ failure leaves neither plots nor report behind; ``plots=False`` writes the repor
 
 from __future__ import annotations
 
+import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -135,7 +136,19 @@ def mismatch_statement(result: FitResult) -> str | None:
         f"(residual rms {span} x the sensor std, per channel below). The channels were "
         "weighted by noise levels estimated from the residuals "
         f"({noise['rounds']} round(s)) instead of the sensor specifications; the residuals "
-        "are model error more than noise."
+        "are model error more than noise." + _settling_text(noise.get("settling"))
+    )
+
+
+def _settling_text(settling: dict | None) -> str:
+    """A sentence for noise levels that had not reached their fixed point (empty if they
+    had, or for reports written before this was recorded)."""
+    if settling is None or settling["settled"]:
+        return ""
+    return (
+        " The noise levels had not settled when the rounds ended: the residual rms differs "
+        f"from the weights by up to {100 * math.expm1(settling['change']):.0f} % on a "
+        "channel, so the weighting between channels is approximate."
     )
 
 

@@ -2,6 +2,7 @@
 section-4.1 reduction, the model-mismatch statement, and no partial outputs on a crash."""
 
 import dataclasses
+import math
 import os
 import subprocess
 import sys
@@ -91,6 +92,21 @@ def test_parameter_file_provenance_carries_the_noise_levels_with_units(mismatche
         "residual_rms [sensor std]",
     }
     assert "residual_rms [m]" in levels["channels"]["x"]
+
+
+@pytest.mark.parametrize("settled", [True, False])
+def test_unsettled_noise_levels_are_stated(mismatched, settled):
+    """Noise levels still moving when the rounds ended (by 16 %: realistic plant 1 of the
+    mismatch study) are said to be approximate, in the report and in the parameter file."""
+    result, _ = mismatched
+    noise = {**result.diagnostics["noise"], "settling": {"change": 0.145, "settled": settled}}
+    unsettled = dataclasses.replace(result, diagnostics={**result.diagnostics, "noise": noise})
+    statement = mismatch_statement(unsettled)
+    assert ("had not settled" in statement) is not settled
+    assert settled or "up to 16 %" in statement
+    levels = noise_levels(unsettled)
+    assert levels["levels_settled"] is settled
+    assert levels["levels_last_change"] == pytest.approx(math.expm1(0.145))
 
 
 def test_sensor_weighted_fit_has_no_mismatch_statement(mismatched):
