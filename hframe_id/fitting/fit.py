@@ -400,9 +400,7 @@ def fit_recordings(
     state, gn, stats, held = best
     gn.evaluations = counter["evaluations"]
     result = _result(problem, ms, gn, state, stages, stats, held, start)
-    result.diagnostics["noise"] = _noise_report(
-        problem, sensor_std, result, rounds, settling
-    )
+    result.diagnostics["noise"] = _noise_report(problem, sensor_std, result, rounds, settling)
     _include_held_uncertainty(problem, recordings, state, result)
     result.wall_time_s = time.perf_counter() - start
     return result
