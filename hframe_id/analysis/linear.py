@@ -107,7 +107,12 @@ def linearize(params: ParameterSet, model: Model | None = None) -> LinearModel:
     model = model or build_model(params.variant)
     values = dict(params.values)
     notes: tuple[str, ...] = ()
-    coulomb = [friction.coulomb for friction in model.frictions]
+    coulomb = [
+        name
+        for friction in model.frictions
+        for name in (friction.coulomb, friction.static)
+        if name is not None
+    ]
     if any(values[name] > 0 for name in coulomb):
         notes = (COULOMB_NOTE,)
     for name in coulomb:

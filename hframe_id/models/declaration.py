@@ -195,7 +195,7 @@ def check_system(
     for friction in system.frictions:
         if friction.coordinate not in coordinates:
             _fail(declaration, f"friction on unknown coordinate {friction.coordinate!r}")
-        for parameter in (friction.viscous, friction.coulomb):
+        for parameter in friction.parameters:
             if parameter not in names:
                 _fail(
                     declaration,

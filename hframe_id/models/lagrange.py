@@ -8,7 +8,9 @@ V(q) stored in the belt springs, the actuation part of the generalized non-conse
 
 as  M(q) qddot = Q_nc + dT/dq - dV/dq - (d^2 T / dqdot dq) qdot,  solved for qddot.
 Friction on every friction-bearing coordinate is viscous plus smoothed Coulomb,
-Q_fr = -(b qdot + F_c tanh(qdot / v_s)), with v_s chosen by the coordinate's unit.
+Q_fr = -(b qdot + F_c tanh(qdot / v_s)), with v_s chosen by the coordinate's unit; a
+coordinate may add a Stribeck curve, the Coulomb level rising to the static (breakaway)
+level F_s at rest: F_c + (F_s - F_c) exp(-(qdot / v_St)^2) in place of F_c.
 """
 
 from __future__ import annotations
@@ -24,12 +26,31 @@ from hframe_id.models.spec import Signal
 class Friction:
     """Friction acting on one generalized coordinate.
 
-    ``viscous`` and ``coulomb`` name the parameters (viscous coefficient, Coulomb level).
+    ``viscous`` and ``coulomb`` name the parameters (viscous coefficient, Coulomb level);
+    ``static`` and ``stribeck_velocity``, if given, a Stribeck curve's breakaway level and
+    velocity (same units as ``coulomb`` and the coordinate's rate).
     """
 
     coordinate: str
     viscous: str
     coulomb: str
+    static: str | None = None
+    stribeck_velocity: str | None = None
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """The names of every parameter this friction uses."""
+        stribeck = (self.static, self.stribeck_velocity) if self.static else ()
+        return (self.viscous, self.coulomb, *stribeck)
+
+    def level(self, parameters: dict[str, ca.SX], rate: ca.SX) -> ca.SX:
+        """The sliding friction level [N or N m] at ``rate``: F_c, or with a Stribeck curve
+        F_c + (F_s - F_c) exp(-(rate / v_St)^2)."""
+        coulomb = parameters[self.coulomb]
+        if self.static is None:
+            return coulomb
+        decay = ca.exp(-((rate / parameters[self.stribeck_velocity]) ** 2))
+        return coulomb + (parameters[self.static] - coulomb) * decay
 
 
 @dataclass(frozen=True)
@@ -58,7 +79,8 @@ class LagrangianSystem:
 def friction_forces(
     system: LagrangianSystem, parameters: dict[str, ca.SX], smoothing: ca.SX
 ) -> ca.SX:
-    """Generalized friction forces Q_fr (viscous + tanh-smoothed Coulomb) per coordinate.
+    """Generalized friction forces Q_fr (viscous + tanh-smoothed Coulomb, with a Stribeck
+    curve where declared: ``Friction.level``) per coordinate.
 
     ``smoothing`` is a 2-vector (v_s linear [m/s], v_s angular [rad/s]).
     """
@@ -70,7 +92,8 @@ def friction_forces(
         v_s = smoothing[0] if unit == "m" else smoothing[1]
         rate = system.qdot[j]
         forces[j] = -(
-            parameters[friction.viscous] * rate + parameters[friction.coulomb] * ca.tanh(rate / v_s)
+            parameters[friction.viscous] * rate
+            + friction.level(parameters, rate) * ca.tanh(rate / v_s)
         )
     return ca.vertcat(*forces)
 

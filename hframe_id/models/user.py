@@ -107,13 +107,13 @@ def _lagrangian(
                 raise ModelError(f"{where}: force on undeclared coordinate {name!r}")
             forces[names.index(name)] = _expression(force, f"force on {name!r}", where)
         frictions = []
-        for name, pair in dict(result.get("friction") or {}).items():
-            if not (isinstance(pair, Sequence) and len(pair) == 2):
+        for name, names_ in dict(result.get("friction") or {}).items():
+            if not (isinstance(names_, Sequence) and len(names_) in (2, 4)):
                 raise ModelError(
-                    f"{where}: friction on {name!r} must be (viscous, coulomb) parameter names, "
-                    f"got {pair!r}"
+                    f"{where}: friction on {name!r} must be (viscous, coulomb) or (viscous, "
+                    f"coulomb, static, stribeck velocity) parameter names, got {names_!r}"
                 )
-            frictions.append(Friction(name, str(pair[0]), str(pair[1])))
+            frictions.append(Friction(name, *map(str, names_)))
         return LagrangianSystem(
             coordinates,
             q,

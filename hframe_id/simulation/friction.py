@@ -92,7 +92,15 @@ class FrictionSite:
 
 @lru_cache(maxsize=32)
 def friction_sites(model: Model) -> tuple[FrictionSite, ...]:
-    """Where friction acts in ``model`` (from its declaration's friction-bearing coordinates)."""
+    """Where friction acts in ``model`` (from its declaration's friction-bearing coordinates).
+    The stick-slip law (Table 2.2) has its own breakaway level: a declared Stribeck curve is
+    an error here, not silently dropped."""
+    curved = [f.coordinate for f in model.frictions if f.static is not None]
+    if curved:
+        raise OptionError(
+            f"stick-slip friction needs viscous + Coulomb friction; model {model.variant} "
+            f"declares a Stribeck curve on {', '.join(curved)} (use the smooth friction)"
+        )
     names = [c.name for c in model.coordinates]
     parameters = list(model.parameter_names)
     return tuple(

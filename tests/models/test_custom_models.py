@@ -204,6 +204,14 @@ def test_a_parameter_file_names_its_model_file(spring_cart):
             SPRING_CART.replace('"forces": {"z":', '"forces": {"zz":'),
             "force on undeclared coordinate 'zz'",
         ),
+        (
+            SPRING_CART.replace('("c", "fc")', '("c", "fc", "fc")'),
+            "must be (viscous, coulomb) or (viscous, coulomb, static, stribeck velocity)",
+        ),
+        (
+            SPRING_CART.replace('("c", "fc")', '("c", "fc", "fs", "v_st")'),
+            "uses undeclared parameter 'fs'",
+        ),
     ],
     ids=[
         "missing-energy",
@@ -213,6 +221,8 @@ def test_a_parameter_file_names_its_model_file(spring_cart):
         "no-model",
         "syntax",
         "bad-force",
+        "friction-names",
+        "undeclared-static",
     ],
 )
 def test_bad_model_files_fail_with_one_line(tmp_path, capsys, text, message):
