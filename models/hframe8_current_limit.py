@@ -15,24 +15,12 @@ a user model's equations do not see the model options, so the model has constant
         --initial models/hframe-8-current-limit.yaml RECORDING.mcap ...
 """
 
-import importlib.util
-from pathlib import Path
-
-from hframe_id.models import ParameterSpec, declare, hframe8
+from hframe_id.models import ParameterSpec, declare, hframe8, sibling_module
 from hframe_id.models.common import MEASURED, spring_energy
 
 
-def _sibling(file_name):
-    """A model file next to this one, as a module (the loader puts no folder on sys.path)."""
-    path = Path(__file__).with_name(file_name)
-    spec = importlib.util.spec_from_file_location(f"{__name__}.{path.stem}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 #: The one-axis model's smooth limit (a clip with rounded corners): one limiter for both models.
-limited_current = _sibling("one_axis_current_limit.py").limited_current
+limited_current = sibling_module(__file__, "one_axis_current_limit.py").limited_current
 
 #: (coordinate, amplifier gain, input) of each motor.
 MOTORS = (("phi1", "g_1", "u1"), ("phi2", "g_2", "u2"))

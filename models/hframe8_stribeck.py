@@ -15,22 +15,10 @@ v_St = 0.5 rad/s and 10 mm/s.
     hframe-id fit --model-file models/hframe8_stribeck.py RECORDING.mcap ...
 """
 
-import importlib.util
-from pathlib import Path
-
-from hframe_id.models import ParameterSpec, declare, hframe8
+from hframe_id.models import ParameterSpec, declare, sibling_module
 
 
-def _sibling(file_name):
-    """A model file next to this one, as a module (the loader puts no folder on sys.path)."""
-    path = Path(__file__).with_name(file_name)
-    spec = importlib.util.spec_from_file_location(f"{__name__}.{path.stem}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-current_limited = _sibling("hframe8_current_limit.py")
+current_limited = sibling_module(__file__, "hframe8_current_limit.py")
 
 #: coordinate: (viscous, Coulomb, static, Stribeck velocity) parameter names.
 FRICTION = {
@@ -50,9 +38,9 @@ MODEL = declare(
     name="hframe-8-stribeck",
     description="H-frame reduced 8th-order model with current-limited amplifiers and "
     "Stribeck friction (Ch. 4 + a servo amplifier's peak current + a breakaway peak)",
-    coordinates=list(hframe8.COORDINATES),
-    inputs=list(hframe8.INPUTS),
-    outputs=list(hframe8.OUTPUTS),
+    coordinates=current_limited.MODEL.coordinates,
+    inputs=current_limited.MODEL.inputs,
+    outputs=current_limited.MODEL.outputs,
     parameters=[
         *current_limited.MODEL.parameters,
         ParameterSpec("tau_sM1", "N m", "motor 1 static (breakaway) friction torque"),

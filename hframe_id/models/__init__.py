@@ -16,7 +16,7 @@ from hframe_id.models.model import Model, freeze
 from hframe_id.models.options import ModelOptions
 from hframe_id.models.registry import declaration, register, variants
 from hframe_id.models.spec import ParameterSpec, Signal
-from hframe_id.models.user import declare, load_model_file
+from hframe_id.models.user import declare, load_model_file, sibling_module
 
 #: The thesis's variants (built in; ``variants()`` also lists plug-ins and loaded model files).
 VARIANTS: tuple[str, ...] = tuple(
@@ -38,6 +38,7 @@ __all__ = [
     "load_model_file",
     "parameter_specs",
     "register",
+    "sibling_module",
     "variants",
 ]
 

@@ -23,6 +23,7 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import casadi as ca
@@ -182,6 +183,17 @@ def _one_line(err: BaseException, path: Path) -> str:
     if isinstance(err, SyntaxError):
         line = f" (line {err.lineno})"
     return f"{type(err).__name__}{line}: {err}".splitlines()[0]
+
+
+def sibling_module(model_file: str | Path, file_name: str) -> ModuleType:
+    """The model file ``file_name`` next to ``model_file`` (a model file's ``__file__``), as a
+    module: one model file building on another's equations (``models/hframe8_stribeck.py``).
+    The loader puts no folder on ``sys.path``, so a plain import would not find it."""
+    path = Path(model_file).with_name(file_name)
+    spec = importlib.util.spec_from_file_location(f"hframe_id_model_sibling_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def load_model_file(path: str | Path) -> ModelDeclaration:
