@@ -526,7 +526,6 @@ def _estimate_noise(problem, ms, best, recordings, stages, counter, progress):
     rounds = 0
     gn = best[1]
     accepted = None
-    change = math.inf
     for rounds in range(1, MAX_NOISE_ROUNDS + 1):
         std = _noise_levels(ms, state, problem.channel_std, sensor_std)
         change = float(np.max(np.abs(np.log(std / problem.channel_std))))
