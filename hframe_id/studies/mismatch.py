@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -97,11 +98,17 @@ def plant_for(seed: int) -> Plant:
     return shipped_plant("hframe-20") if seed < 0 else realistic_plant("hframe-20", seed)
 
 
-def training_recordings(plant: Plant, noise_seed: int, train: str = "steps") -> list[Recording]:
-    """The training set ``train`` (``TRAINING_SETS``) recorded from ``plant`` (sensor seeds
-    1000 ``noise_seed`` + index)."""
+#: How a study records a protocol on a plant: (plant, protocol, sensor seed) -> Recording.
+Recorder = Callable[[Plant, object, int], Recording]
+
+
+def training_recordings(
+    plant: Plant, noise_seed: int, train: str = "steps", record: Recorder = record_realistic
+) -> list[Recording]:
+    """The training set ``train`` (``TRAINING_SETS``) recorded from ``plant`` by ``record``
+    (sensor seeds 1000 ``noise_seed`` + index)."""
     return [
-        record_realistic(plant, protocol, seed=1000 * noise_seed + i)
+        record(plant, protocol, 1000 * noise_seed + i)
         for i, protocol in enumerate(TRAINING_SETS[train])
     ]
 
@@ -139,15 +146,15 @@ def fit_and_record_held_out(
     held_out: dict,
     noise_seed: int,
     options: FitOptions | None,
+    record: Recorder = record_realistic,
 ) -> tuple[FitResult, float, dict[str, Recording]]:
     """The fit of ``training`` from ``start_file``, its wall time [s], and the held-out
-    protocols recorded from ``plant`` (sensor seed 10000 + ``noise_seed``)."""
+    protocols recorded from ``plant`` by ``record`` (sensor seed 10000 + ``noise_seed``)."""
     start = time.perf_counter()
     result = fit_recordings(training, load_parameter_file(start_file), options)
     wall = time.perf_counter() - start
     recordings = {
-        name: record_realistic(plant, protocol, seed=10_000 + noise_seed)
-        for name, protocol in held_out.items()
+        name: record(plant, protocol, 10_000 + noise_seed) for name, protocol in held_out.items()
     }
     return result, wall, recordings
 
@@ -187,14 +194,18 @@ def run_trial(
     options: FitOptions | None = None,
     train: str = "steps",
     start: Path = TABLE_4_2,
+    plant: Plant | None = None,
+    record: Recorder = record_realistic,
 ) -> MismatchTrial:
     """Fit one realistic plant's training set ``train`` from the parameter file ``start``
     (Table 4.2) and judge it on the held-out recordings (``HELD_OUT``); a model other than
-    hframe-8 also against the reduction in that model (``reduction_in_model``)."""
-    plant = plant_for(seed)
-    training = training_recordings(plant, noise_seed, train)
+    hframe-8 also against the reduction in that model (``reduction_in_model``). The plant is
+    ``plant_for(seed)`` unless ``plant`` is given (``seed`` then only labels the trial), its
+    recordings made by ``record`` (default: the realistic sim rig)."""
+    plant = plant or plant_for(seed)
+    training = training_recordings(plant, noise_seed, train, record)
     result, wall, held_out = fit_and_record_held_out(
-        plant, training, start, HELD_OUT, noise_seed, options
+        plant, training, start, HELD_OUT, noise_seed, options, record
     )
     return MismatchTrial(
         seed=seed,
