@@ -29,7 +29,13 @@ from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.plant import Plant
 from hframe_id.rig.realistic import record_realistic, shipped_plant
-from hframe_id.studies.mismatch import TRAINING_SETS, MismatchTrial, Recorder, run_trial
+from hframe_id.studies.mismatch import (
+    TRAINING_SETS,
+    MismatchTrial,
+    Recorder,
+    comparison_text,
+    run_trial,
+)
 
 #: Sample period of every recording [s] (the realistic rig's default).
 SAMPLE_PERIOD_S = 1e-3
@@ -101,8 +107,7 @@ def variants() -> dict[str, Variant]:
 
 
 def at_least_as_good(trial: MismatchTrial) -> int:
-    """Held-out channel cases (of 8) where the fit's simulation fit is at least the
-    reduction's."""
+    """Held-out channel cases where the fit's simulation fit is at least the reduction's."""
     return sum(
         trial.held_out_fit[name][channel] >= trial.reference_fit[name][channel]
         for name in trial.held_out_fit
@@ -111,27 +116,26 @@ def at_least_as_good(trial: MismatchTrial) -> int:
 
 
 def variant_line(name: str, trial: MismatchTrial) -> str:
-    """One line per variant: outcome, count, fit percentages, training criterion."""
-    fits = "; ".join(
-        f"{held}: "
-        + " ".join(
-            f"{c} {trial.held_out_fit[held][c]:.1f}/{trial.reference_fit[held][c]:.1f}"
-            for c in trial.held_out_fit[held]
-        )
-        for held in trial.held_out_fit
-    )
+    """One line per variant: outcome, count, training criteria and held-out fits
+    (``studies.mismatch.comparison_text``)."""
+    cases = sum(len(channels) for channels in trial.held_out_fit.values())
+    criteria, held_out = comparison_text(trial, "reduction")
     bound = ", ".join(trial.at_bound) or "-"
     return (
         f"{name}: success={trial.success} time {trial.wall_time_s:.0f} s; fitted >= reduction "
-        f"in {at_least_as_good(trial)} of 8; {fits} (fit %, fitted/reduction); training "
-        f"criterion {trial.criterion[0]:.0f}/{trial.criterion[1]:.0f}; at bound: {bound}"
+        f"in {at_least_as_good(trial)} of {cases}; training criterion {criteria}; held-out "
+        f"fit {held_out}; at bound: {bound}"
     )
 
 
 def main(argv: list[str] | None = None) -> int:
     """The command line of this study (``--help``); prints one line per variant."""
     plants = variants()
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0],
+        epilog="variants: "
+        + "; ".join(f"{name}: {variant.description}" for name, variant in plants.items()),
+    )
     parser.add_argument(
         "--variants",
         nargs="+",
