@@ -1,21 +1,23 @@
 """Mismatch-effects study: which realistic-plant effect makes hframe-8 fits lose held out.
 
 Which of the realistic plant's effects make an hframe-8 fit generalize worse than the plant's
-own reduction: the mismatch study on the shipped plant with its effects taken away.
+own reduction: the mismatch study on the shipped plant (or fresh ones, ``--seeds``) with its
+effects taken away.
 
 The mismatch study (``studies.mismatch``: six section-4.4 steps fitted from Table 4.2 with
 the default options, judged on a held-out multisine and 5 V step against the plant's
-section-4.1 reduction) is run on variants of the shipped hframe-20 plant (``VARIANTS``): each
+section-4.1 reduction) is run on variants of a realistic hframe-20 plant (``variants``): each
 effect of docs/realistic-rig.md removed alone, all of them removed but the 20th-order belts
 and the Table 2.2 stick-slip law, the 20th-order belts with the models' own smooth friction
 (the plain sim rig), and the stick-slip law alone (a plant that is the reduction itself,
 recorded by the realistic rig with every other effect removed), trained on the six steps or
 on the steps and a multisine (``--train``). Each variant is judged
-against its own reduction, which for every variant but the last is the shipped plant's.
+against its own reduction, which for every variant but the last is the base plant's.
 
     python -m hframe_id.studies.mismatch_effects
     python -m hframe_id.studies.mismatch_effects --variants shipped stick-slip-only
     python -m hframe_id.studies.mismatch_effects --train multisine
+    python -m hframe_id.studies.mismatch_effects --variants no-current-limit --seeds -1 0 1
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from hframe_id.studies.mismatch import (
     MismatchTrial,
     Recorder,
     comparison_text,
+    plant_for,
     run_trial,
 )
 
@@ -69,14 +72,14 @@ def without_effects(plant: Plant) -> Plant:
     )
 
 
-def variants() -> dict[str, Variant]:
+def variants(base: Plant | None = None) -> dict[str, Variant]:
     """The plants of the study, by name (docs/fitting.md, "Where the held-out gap comes
-    from")."""
-    shipped = shipped_plant("hframe-20")
+    from"): ``base`` (default: the shipped hframe-20 plant) with its effects taken away."""
+    shipped = base or shipped_plant("hframe-20")
     constants = shipped.constants
     bare = without_effects(shipped)
     return {
-        "shipped": Variant("the shipped plant, every effect", shipped),
+        "shipped": Variant("the base plant, every effect", shipped),
         "no-stribeck": Variant(
             "without the Stribeck peak (F_s = F_c)",
             replace(shipped, constants=replace(constants, static_to_coulomb_ratio=1.0)),
@@ -116,31 +119,31 @@ def at_least_as_good(trial: MismatchTrial) -> int:
 
 
 def variant_line(name: str, trial: MismatchTrial) -> str:
-    """One line per variant: outcome, count, training criteria and held-out fits
+    """One line per variant and plant: outcome, count, training criteria and held-out fits
     (``studies.mismatch.comparison_text``)."""
     cases = sum(len(channels) for channels in trial.held_out_fit.values())
     criteria, held_out = comparison_text(trial, "reduction")
     bound = ", ".join(trial.at_bound) or "-"
     return (
-        f"{name}: success={trial.success} time {trial.wall_time_s:.0f} s; fitted >= reduction "
-        f"in {at_least_as_good(trial)} of {cases}; training criterion {criteria}; held-out "
-        f"fit {held_out}; at bound: {bound}"
+        f"{name} (plant {trial.seed}): success={trial.success} time {trial.wall_time_s:.0f} s; "
+        f"fitted >= reduction in {at_least_as_good(trial)} of {cases}; training criterion "
+        f"{criteria}; held-out fit {held_out}; at bound: {bound}"
     )
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line of this study (``--help``); prints one line per variant."""
-    plants = variants()
+    """The command line of this study (``--help``); prints one line per variant and plant."""
+    described = variants()
     parser = argparse.ArgumentParser(
         description=__doc__.splitlines()[0],
         epilog="variants: "
-        + "; ".join(f"{name}: {variant.description}" for name, variant in plants.items()),
+        + "; ".join(f"{name}: {variant.description}" for name, variant in described.items()),
     )
     parser.add_argument(
         "--variants",
         nargs="+",
-        choices=tuple(plants),
-        default=list(plants),
+        choices=tuple(described),
+        default=list(described),
         help="plants to run (default: all)",
     )
     parser.add_argument(
@@ -149,11 +152,20 @@ def main(argv: list[str] | None = None) -> int:
         default="steps",
         help="training set: the six steps, or the steps and a 3 V multisine (phase seed 1)",
     )
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=[-1],
+        help="base plants: -1 the shipped one, others fresh (realistic_plant seeds)",
+    )
     args = parser.parse_args(argv)
-    for name in args.variants:
-        variant = plants[name]
-        trial = run_trial(-1, train=args.train, plant=variant.plant, record=variant.record)
-        print(variant_line(name, trial), flush=True)
+    for seed in args.seeds:
+        plants = variants(plant_for(seed))
+        for name in args.variants:
+            variant = plants[name]
+            trial = run_trial(seed, train=args.train, plant=variant.plant, record=variant.record)
+            print(variant_line(name, trial), flush=True)
     return 0
 
 

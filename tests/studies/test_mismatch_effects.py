@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hframe_id.recordings.simulated import simulate_recording
-from hframe_id.rig.realistic import record_realistic, shipped_plant
+from hframe_id.rig.realistic import realistic_plant, record_realistic, shipped_plant
 from hframe_id.studies import mismatch, mismatch_effects
 from hframe_id.studies.mismatch import HELD_OUT, MismatchTrial, training_recordings
 from hframe_id.studies.mismatch_effects import (
@@ -148,8 +148,31 @@ def test_main_runs_the_chosen_variants_with_their_recorders(monkeypatch, capsys)
     assert [kw["record"] for kw in calls] == [record_realistic, record_smooth]
     assert {kw["train"] for kw in calls} == {"multisine"}
     out = capsys.readouterr().out.splitlines()
-    assert out[0].startswith("no-delays: success=True")
+    assert out[0].startswith("no-delays (plant -1): success=True")
     assert "fitted >= reduction in 0 of 8" in out[0]
     with pytest.raises(SystemExit):
         mismatch_effects.main(["--variants", "no-belts"])
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_seeds_take_the_variants_of_fresh_plants(monkeypatch):
+    """``--seeds``: each base plant (the shipped one for -1, ``realistic_plant`` otherwise) is
+    varied as the shipped one is, and its trial labelled with its seed."""
+    calls = []
+
+    def fake_trial(seed, **kw):
+        calls.append((seed, kw["plant"]))
+        return _trial(90.0, 91.0)
+
+    monkeypatch.setattr(mismatch_effects, "run_trial", fake_trial)
+    argv = ["--variants", "shipped", "no-current-limit", "--seeds", "-1", "3"]
+    assert mismatch_effects.main(argv) == 0
+    fresh = realistic_plant("hframe-20", 3)
+    assert calls == [
+        (-1, shipped_plant("hframe-20")),
+        (-1, variants()["no-current-limit"].plant),
+        (3, fresh),
+        (3, variants(fresh)["no-current-limit"].plant),
+    ]
+    assert calls[3][1].parameters == fresh.parameters
+    assert calls[3][1].constants.current_limit_a == math.inf
