@@ -95,7 +95,11 @@ REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
 #: can crawl under model mismatch (the l1 merit is not smooth where defects change sign;
 #: docs/fitting.md, "Model mismatch").
 WARM_COST_RTOL = 1e-6
-MAX_NOISE_ROUNDS = 5
+#: The iteration settles slowly where a channel's level first overshoots: two realistic
+#: steps fitted with six parameters free (tests/fitting/test_fit_mismatch.py) moved phi1's
+#: std 0.0062, 0.0039, 0.0024, 0.0018, 0.0016, 0.0015 rad and settled in round 7 (measured
+#: with casadi 3.8.2 and numpy 2.4.6; with the packages of 2026-11-24 it settled within 5).
+MAX_NOISE_ROUNDS = 10
 NOISE_RTOL = 0.05
 #: Iterations of the state-estimation pre-pass (nodes only, parameters held), and the
 #: relative decrease of its merit per iteration below which it stops earlier.
