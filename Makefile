@@ -18,12 +18,15 @@ $(STAMP): pyproject.toml constraints.txt
 	@touch $(STAMP)
 
 # The default suite leaves out the long studies marked `slow` (recovery, one-axis, hframe-20
-# fits); test-all runs everything, as CI does.
+# fits); test-all runs everything, as CI does. One pytest-xdist worker per logical core, each
+# test file on one worker (its module fixtures, some of them fits, are built once).
+PYTEST := MPLBACKEND=Agg $(BIN)/python -m pytest -q -n logical --dist loadfile
+
 test: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 test-all: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m pytest -q
+	$(PYTEST)
 
 lint: $(STAMP)
 	$(BIN)/ruff check hframe_id tests
