@@ -75,36 +75,36 @@ def without_effects(plant: Plant) -> Plant:
 def variants(base: Plant | None = None) -> dict[str, Variant]:
     """The plants of the study, by name (docs/fitting.md, "Where the held-out gap comes
     from"): ``base`` (default: the shipped hframe-20 plant) with its effects taken away."""
-    shipped = base or shipped_plant("hframe-20")
-    constants = shipped.constants
-    bare = without_effects(shipped)
+    plant = base or shipped_plant("hframe-20")
+    constants = plant.constants
+    bare = without_effects(plant)
     return {
-        "shipped": Variant("the base plant, every effect", shipped),
+        "shipped": Variant("the base plant, every effect", plant),
         "no-stribeck": Variant(
             "without the Stribeck peak (F_s = F_c)",
-            replace(shipped, constants=replace(constants, static_to_coulomb_ratio=1.0)),
+            replace(plant, constants=replace(constants, static_to_coulomb_ratio=1.0)),
         ),
         "no-current-limit": Variant(
             "without the current limit",
-            replace(shipped, constants=replace(constants, current_limit_a=math.inf)),
+            replace(plant, constants=replace(constants, current_limit_a=math.inf)),
         ),
         "no-delays": Variant(
             "without the actuation delay and the laser latency",
-            replace(shipped, actuation_delay_samples=0, laser_latency_samples=0),
+            replace(plant, actuation_delay_samples=0, laser_latency_samples=0),
         ),
         "constant-stiffness": Variant(
             "constant belt stiffness",
-            replace(shipped, position_dependent_stiffness=False),
+            replace(plant, position_dependent_stiffness=False),
         ),
         "belts-and-stick-slip": Variant("20th-order belts and Table 2.2 stick-slip only", bare),
         "belts-smooth-friction": Variant(
             "20th-order belts with the models' smooth friction (plain sim rig)",
-            shipped,
+            plant,
             record_smooth,
         ),
         "stick-slip-only": Variant(
             "the reduction itself as the plant, with Table 2.2 stick-slip",
-            bare.with_parameters(shipped.reference()),
+            bare.with_parameters(plant.reference()),
         ),
     }
 
