@@ -379,8 +379,9 @@ def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path
 
 def _cross_validate(
     recordings: list[Recording], initial: ParameterSet, options: FitOptions, quiet: bool
-) -> LeaveOneOutTable:
-    """Leave-one-recording-out refits with the fit's options, a line per fold on stderr."""
+) -> LeaveOneOutTable | None:
+    """Leave-one-recording-out refits with the fit's options, a line per fold on stderr; None
+    (with a warning) if a refit raises: the fit is kept without its cross-validation."""
     from hframe_id.validation.cross_validation import leave_one_out
 
     def announce(fold: int, folds: int, held_out: str) -> None:
@@ -392,9 +393,17 @@ def _cross_validate(
             )
 
     start = time.perf_counter()
-    table = leave_one_out(
-        recordings, initial, dataclasses.replace(options, verbose=0, progress=None), announce
-    )
+    try:
+        table = leave_one_out(
+            recordings, initial, dataclasses.replace(options, verbose=0, progress=None), announce
+        )
+    except Exception as err:  # the fit stands without it
+        print(
+            f"hframe-id: warning: cross-validation failed ({type(err).__name__}: {err}); "
+            "the fit is written without it",
+            file=sys.stderr,
+        )
+        return None
     if not quiet:
         print(
             f"cross-validation: {len(recordings)} refits in {time.perf_counter() - start:.1f} s",
@@ -426,10 +435,12 @@ def _write_outputs(
     out_dir: Path,
     cross_validation: LeaveOneOutTable | None,
     drawer: InlineDrawer | ProcessDrawer | None = None,
-) -> tuple[str, Path | None, Path]:
-    """The parameter file (a successful fit only) and the report with its plots drawn by
-    ``drawer`` (None: no plots): all of them or, on any exception, none (nor ``out_dir`` if
-    this created it)."""
+) -> tuple[str, Path | None, Path | None]:
+    """The parameter file (a successful fit only), then the report with its plots drawn by
+    ``drawer`` (None: no plots). The parameter file is the fit's result: once written it is
+    kept, and a failure of the report (which leaves nothing of itself) is a warning on
+    stderr, the report then None. A failure before the parameter file leaves nothing (nor
+    ``out_dir`` if this created it)."""
     from hframe_id.fitting.output import write_parameter_file
     from hframe_id.fitting.report import write_report
 
@@ -438,11 +449,15 @@ def _write_outputs(
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise FitError(f"--out-dir {out_dir}: cannot create it ({err.strerror})") from err
-    parameter_file = None
     try:
         fit_id, parameter_file = write_parameter_file(
             result, recordings, paths, initial_path, out_dir
         )
+    except BaseException:
+        if created and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+        raise
+    try:
         report = write_report(
             result,
             recordings,
@@ -453,12 +468,14 @@ def _write_outputs(
             plots=drawer is not None,
             drawer=drawer,
         )
-    except BaseException:
-        if parameter_file is not None:
-            parameter_file.unlink(missing_ok=True)
-        if created and not any(out_dir.iterdir()):
-            out_dir.rmdir()
-        raise
+    except Exception as err:  # the fit is kept: a report is a view of it
+        print(
+            f"hframe-id: warning: the report was not written ({type(err).__name__}: {err}); "
+            + (f"the parameter file {parameter_file} is" if parameter_file else "nothing is"),
+            "kept",
+            file=sys.stderr,
+        )
+        report = None
     return fit_id, parameter_file, report
 
 
@@ -512,9 +529,10 @@ def run(args: argparse.Namespace) -> int:
         cross_validation = None
         if result.success and len(recordings) > 1 and not args.no_cross_validation:
             cross_validation = _cross_validate(recordings, initial, options, args.quiet)
-            from hframe_id.fitting.jackknife import add_jackknife_intervals
+            if cross_validation is not None:
+                from hframe_id.fitting.jackknife import add_jackknife_intervals
 
-            add_jackknife_intervals(result, cross_validation)
+                add_jackknife_intervals(result, cross_validation)
         fit_id, parameter_file, report = _write_outputs(
             result, recordings, paths, initial_path, out_dir, cross_validation, drawer
         )
@@ -530,7 +548,8 @@ def run(args: argparse.Namespace) -> int:
     _print_mismatch(result, human)
     if parameter_file:
         print(f"parameter file: {parameter_file}", file=human)
-    print(f"report: {report}", file=human)
+    if report:
+        print(f"report: {report}", file=human)
     if args.json:
         print(json.dumps(fit_summary(result, fit_id, parameter_file, report), indent=2))
     if not result.success:

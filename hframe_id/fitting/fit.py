@@ -105,6 +105,11 @@ NOISE_RTOL = 0.05
 #: relative decrease of its merit per iteration below which it stops earlier.
 PREPASS_ITERATIONS = 30
 PREPASS_COST_RTOL = 1e-4
+#: Times a fit that ends on its default box (``FitOptions.bound_factor``) is repeated with
+#: the factor squared (10, 100, 1e4 by default: four decades either side of the start hold
+#: every rig of the envelope drawn for issue 25 around Table 4.2, where friction spans 1e-2-10
+#: and masses, stiffness 0.4-2.5); still on it after that, the fit fails saying so.
+BOX_WIDENINGS = 2
 
 
 @dataclass(frozen=True)
@@ -366,6 +371,32 @@ def fit_recordings(
     """
     options = options or FitOptions()
     start = time.perf_counter()
+    for _ in range(BOX_WIDENINGS):
+        result = _fit_in_box(recordings, initial, options)
+        if not result.diagnostics["at_default_box"]:
+            break
+        options = replace(options, bound_factor=options.bound_factor**2)
+    else:
+        result = _fit_in_box(recordings, initial, options)
+        boxed = result.diagnostics["at_default_box"]
+        if boxed and result.success:
+            result = replace(
+                result,
+                success=False,
+                message=f"the default box decided the answer: {', '.join(boxed)} ended on a "
+                f"bound of x/÷{options.bound_factor:g} of the start after {BOX_WIDENINGS} "
+                "widenings (the data push them further: a start closer to the rig, or "
+                "--bounds, decides instead); " + result.message,
+            )
+    result.wall_time_s = time.perf_counter() - start
+    return result
+
+
+def _fit_in_box(
+    recordings: list[Recording], initial: ParameterSet, options: FitOptions
+) -> FitResult:
+    """``fit_recordings`` within the box of ``options`` (its bounds and bound factor)."""
+    start = time.perf_counter()
     problem = build_problem(recordings, initial, options)
     ms = MultipleShooting(problem)
     progress = _progress_sink(options)
@@ -434,7 +465,7 @@ def _include_held_uncertainty(problem, recordings, state, result) -> None:
     for name in result.free_names:
         est = result.estimates[name]
         f = problem.free_names.index(name)
-        signed, scale = problem.signed[f], problem.signed_scale[f]
+        signed, scale = problem.linear[f], problem.linear_scale[f]
         variance = max(float(variances[name]), 0.0)
         theta_std = est.std_error / scale if signed else est.relative_std
         std, rel, ci95 = spread(est.estimate, math.sqrt(theta_std**2 + variance), signed, scale, z)
@@ -1058,7 +1089,8 @@ def spread(
     """(std error [SI], relative std, interval) of a free parameter from the std of its theta.
 
     Log-scale parameters: theta is a relative change, the interval symmetric in log(p),
-    [p / f, p f] with f = exp(z std). Signed ones: p = p0 + s theta, the interval p -/+ z s std.
+    [p / f, p f] with f = exp(z std). Linear ones (``signed``: nonnegative and real kinds):
+    p = p0 + s theta, the interval p -/+ z s std.
     """
     if signed:
         std = scale * theta_std
@@ -1075,7 +1107,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
     specs = {s.name: s for s in problem.model.parameters}
     z = stats.z_value(options.confidence)
     estimates: dict[str, ParameterEstimate] = {}
-    at_bound = []
+    at_bound, at_box = [], []
     active_names = stats.names
     for i, name in enumerate(names):
         spec = specs[name]
@@ -1101,12 +1133,19 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         bound = bool(state.active[f]) and is_at_bound(
             state.theta[f], problem.theta_lower[f], problem.theta_upper[f], rel
         )
+        floor = problem.zero_floor[f] and state.theta[f] < 0
+        if bound and floor:  # at zero: physics ends it there, not the box
+            bound = False
         if bound:  # the box, not the data, fixes it
             at_bound.append(name)
             identified = False
-        std, rel, ci95 = spread(value, rel, problem.signed[f], problem.signed_scale[f], z)
+            if problem.on_box(state.theta)[f]:
+                at_box.append(name)
+        std, rel, ci95 = spread(value, rel, problem.linear[f], problem.linear_scale[f], z)
         if bound:
             ci95 = _ended_at_bound(problem, state, f, ci95)
+        elif problem.zero_floor[f]:
+            ci95 = (max(ci95[0], 0.0), ci95[1])
         estimates[name] = ParameterEstimate(
             name=name,
             unit=spec.unit,
@@ -1195,6 +1234,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
             "max_defect": final.max_defect,
             "residual_rms_noise_std": misfit,
             "substeps": list(final.substeps),
+            "at_default_box": tuple(at_box),
         },
     )
 

@@ -32,7 +32,7 @@ def jackknife_interval(
 ) -> tuple[float, float]:
     """The ``confidence`` interval of ``value`` (SI, non-zero unless ``signed``) from its
     jackknife std [SI] over ``folds`` (>= 2) folds: symmetric in log(value), or linear for a
-    signed parameter (``fit.spread`` with Student's t for z)."""
+    parameter fitted linearly (``signed``: ``ParameterSpec.linear``) (``fit.spread`` with Student's t for z)."""
     t = student_t_quantile(0.5 + confidence / 2, folds - 1)
     theta_std = jackknife_std if signed else jackknife_std / abs(value)
     return spread(value, theta_std, signed, 1.0, t)[2]
@@ -45,7 +45,7 @@ def add_jackknife_intervals(result: FitResult, table: LeaveOneOutTable) -> None:
     the estimate from all recordings) and there are two or more."""
     if len(table.folds) < 2 or not all(fold.success for fold in table.folds):
         return
-    signed = {spec.name: spec.signed for spec in result.problem.model.parameters}
+    signed = {spec.name: spec.linear for spec in result.problem.model.parameters}
     confidence = result.options.confidence
     for row in table.spread:
         est = result.estimates.get(row.name)

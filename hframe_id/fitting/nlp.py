@@ -153,9 +153,9 @@ class _Transcription:
         theta_all = ca.DM(np.where(active, 0.0, theta)) + ca.DM(np.eye(nf)[:, active]) @ (
             theta_active
         )
-        start, signed = ca.DM(problem.p_initial[free]), ca.DM(problem.signed.astype(float))
+        start, signed = ca.DM(problem.p_initial[free]), ca.DM(problem.linear.astype(float))
         p_free = (1 - signed) * start * ca.exp(theta_all) + signed * (
-            start + ca.DM(problem.signed_scale) * theta_all
+            start + ca.DM(problem.linear_scale) * theta_all
         )
         select_free = np.zeros((len(problem.p_initial), nf))
         select_free[free, np.arange(nf)] = 1.0

@@ -118,9 +118,13 @@ class FitOptions:
         holds the unmeasured idler's J_2, B_2, tau_c2).
     fix : names or patterns removed from the free set (applied after ``free``).
     bounds : ``{name: (low, high)}`` in SI units for free parameters (0 < low for the
-        log-scale ones). Default: the initial value divided and multiplied by
-        ``bound_factor``; for signed parameters p0 -/+ ``bound_factor`` |p0|.
-    bound_factor : default bound factor (> 1): free parameters stay within [p0 / f, p0 * f].
+        log-scale ones, 0 <= low for nonnegative ones). Default (``problem.default_bounds``):
+        positive parameters [p0 / f, p0 f], nonnegative ones [0, p0 f] (zero reachable),
+        real ones p0 -/+ f |p0|, f the ``bound_factor``.
+    bound_factor : default bound factor f (> 1). A fit that ends with a parameter on a
+        default bound (not zero, not a given bound) is repeated with f squared, at most
+        ``fit.BOX_WIDENINGS`` times: the default box is a guard for the exponential, not a
+        statement about the rig, so it must not decide the answer.
     channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
         by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
         std for positions (both from the recording's rig metadata).

@@ -71,6 +71,10 @@ class FitProblem:
     free: tuple[int, ...]  # indices of free parameters in model order
     theta_lower: np.ndarray  # bounds on theta (``parameters``), free parameters
     theta_upper: np.ndarray
+    #: (n_f,) True where that bound is the default box (``ProblemOptions.bound_factor``):
+    #: neither a physical limit (0 of a nonnegative parameter) nor the user's ``bounds``
+    box_lower: np.ndarray
+    box_upper: np.ndarray
     experiments: tuple[Experiment, ...]
     channel_std: np.ndarray  # (n_y,) [SI]
     quantization: np.ndarray  # (n_y,) encoder step [rad] of quantized channels, else 0
@@ -98,13 +102,14 @@ class FitProblem:
         return tuple(n for n, w in zip(self.free_names, self.prior_weight, strict=True) if w > 0)
 
     @property
-    def signed(self) -> np.ndarray:
-        """(n_f,) True for free parameters of either sign (fitted linearly)."""
-        return np.array([self.model.parameters[i].signed for i in self.free], dtype=bool)
+    def linear(self) -> np.ndarray:
+        """(n_f,) True for free parameters fitted linearly (nonnegative and real kinds),
+        False for log scale (positive)."""
+        return np.array([self.model.parameters[i].linear for i in self.free], dtype=bool)
 
     @property
-    def signed_scale(self) -> np.ndarray:
-        """(n_f,) scale s of the linear transform of signed parameters: |p_initial|, or 1 (SI)
+    def linear_scale(self) -> np.ndarray:
+        """(n_f,) scale s of the linear transform of linear parameters: |p_initial|, or 1 (SI)
         for a start at 0 (unused for log-scale parameters)."""
         start = np.abs(self.p_initial[list(self.free)])
         return np.where(start > 0, start, 1.0)
@@ -113,13 +118,14 @@ class FitProblem:
         """All parameters (SI, model order) for theta of the free ones.
 
         theta = ln(p / p_initial) for positive parameters (relative changes), and
-        theta = (p - p_initial) / s for signed ones (``signed_scale``), so that theta is a
-        relative change for both near the start.
+        theta = (p - p_initial) / s for linear ones (``linear_scale``), so that theta is a
+        relative change for both near the start, and a nonnegative parameter reaches 0 at
+        theta = -p_initial / s.
         """
         p = self.p_initial.copy()
         start = self.p_initial[list(self.free)]
         p[list(self.free)] = np.where(
-            self.signed, start + self.signed_scale * theta, start * np.exp(theta)
+            self.linear, start + self.linear_scale * theta, start * np.exp(theta)
         )
         return p
 
@@ -128,12 +134,35 @@ class FitProblem:
         ``parameters``)."""
         p = np.array([params.values[n] for n in self.model.parameter_names])[list(self.free)]
         start = self.p_initial[list(self.free)]
-        return np.where(self.signed, (p - start) / self.signed_scale, np.log(np.abs(p / start)))
+        with np.errstate(divide="ignore"):
+            logs = np.log(np.abs(p / start))
+        return np.where(self.linear, (p - start) / self.linear_scale, logs)
 
     def parameter_slopes(self, p: np.ndarray) -> np.ndarray:
         """(n_f,) d p / d theta of the free parameters at all parameters ``p`` (SI, model
-        order): p itself for log scale, s for signed ones."""
-        return np.where(self.signed, self.signed_scale, p[list(self.free)])
+        order): p itself for log scale, s for linear ones."""
+        return np.where(self.linear, self.linear_scale, p[list(self.free)])
+
+    @property
+    def zero_floor(self) -> np.ndarray:
+        """(n_f,) True for nonnegative free parameters whose lower bound is the physical 0
+        (not a bound the user gave): an estimate there is zero, not stopped by a box."""
+        given = self.options.problem_options.bounds
+        return np.array(
+            [
+                self.model.parameters[i].kind == "nonnegative"
+                and self.model.parameters[i].name not in given
+                for i in self.free
+            ],
+            dtype=bool,
+        )
+
+    def on_box(self, theta: np.ndarray) -> np.ndarray:
+        """(n_f,) True where the bound nearer to a free parameter's ``theta`` belongs to the
+        default box (``box_lower``/``box_upper``): for parameters found at a bound, whether
+        the default box, not the data, physics or the user, decided the value."""
+        lower_nearer = theta - self.theta_lower < self.theta_upper - theta
+        return np.where(lower_nearer, self.box_lower, self.box_upper)
 
 
 def _suggest(word: str, choices: Sequence[str]) -> str:
@@ -377,37 +406,42 @@ def build_problem(
             raise FitError(f"bounds: unknown parameter {name!r}{_suggest(name, names)}")
         if name not in free_names:
             raise FitError(f"bounds given for {name!r}, which is not free")
-    lower, upper = [], []
+    lower, upper, box_lower, box_upper = [], [], [], []
     for name in free_names:
         value = p0[names.index(name)]
-        signed = model.parameters[names.index(name)].signed
-        if not signed and not value > 0:
+        kind = model.parameters[names.index(name)].kind
+        if kind == "positive" and not value > 0:
             raise FitError(
-                f"free parameter {name} starts at {float(value)!r}; parameters are fitted in log "
-                f"scale, so a free one needs a start > 0 (give a small positive value)"
+                f"free parameter {name} starts at {float(value)!r}; a positive parameter is "
+                f"fitted in log scale, so a free one needs a start > 0 (give a small positive "
+                "value)"
             )
-        scale = abs(value) if value != 0 else 1.0
-        default = (
-            (value - wanted.bound_factor * scale, value + wanted.bound_factor * scale)
-            if signed
-            else (value / wanted.bound_factor, value * wanted.bound_factor)
-        )
-        low, high = wanted.bounds.get(name, default)
-        if not signed and not low > 0:
+        if kind == "nonnegative" and not value >= 0:
+            raise FitError(f"free parameter {name} starts at {float(value)!r}; it must be >= 0")
+        low, high = default = default_bounds(kind, value, wanted.bound_factor)
+        given = name in wanted.bounds
+        if given:
+            low, high = wanted.bounds[name]
+        if kind == "positive" and not low > 0:
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}]: a parameter fitted in log scale needs "
                 "0 < low"
             )
+        if kind == "nonnegative" and not low >= 0:
+            raise FitError(f"bounds for {name} [{low:g}, {high:g}]: a {kind} parameter needs 0 <= low")
         if not low <= value <= high:
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}] exclude its initial value {value:g}"
             )
-        if signed:
-            lower.append((low - value) / scale)
-            upper.append((high - value) / scale)
-        else:
+        if kind == "positive":
             lower.append(math.log(low / value))
             upper.append(math.log(high / value))
+        else:
+            scale = abs(value) if value != 0 else 1.0
+            lower.append((low - value) / scale)
+            upper.append((high - value) / scale)
+        box_lower.append(not given and kind != "nonnegative")
+        box_upper.append(not given)
     free = tuple(names.index(n) for n in free_names)
 
     outputs = [s.name for s in model.outputs]
@@ -453,6 +487,8 @@ def build_problem(
         free=free,
         theta_lower=np.array(lower),
         theta_upper=np.array(upper),
+        box_lower=np.array(box_lower, dtype=bool),
+        box_upper=np.array(box_upper, dtype=bool),
         experiments=experiments,
         channel_std=std,
         quantization=quantization,
@@ -461,6 +497,18 @@ def build_problem(
         options=options,
         prior_weight=np.array([1.0 / priors[n] if n in priors else 0.0 for n in free_names]),
     )
+
+
+def default_bounds(kind: str, value: float, factor: float) -> tuple[float, float]:
+    """The default box of a free parameter starting at ``value`` [SI]: [value / f, value f]
+    for a positive one (log scale), [0, value f] for a nonnegative one (zero, physical, is
+    reachable; [0, f] SI from a start at 0), value -/+ f |value| for a real one."""
+    scale = abs(value) if value != 0 else 1.0
+    if kind == "positive":
+        return value / factor, value * factor
+    if kind == "nonnegative":
+        return 0.0, max(value, 0.0) + (factor - 1.0) * scale
+    return value - factor * scale, value + factor * scale
 
 
 def output_matrix(model: Model) -> np.ndarray:

@@ -114,6 +114,14 @@ def _fmt(value: float) -> str:
     return f"{value:.5g}"
 
 
+def _relative_difference(value: float, reference: float, digits: int) -> str:
+    """``value`` against ``reference`` in percent, or the absolute difference where the
+    reference is 0 (a linear table's Coulomb friction), which has no relative one."""
+    if reference == 0:
+        return f"{_fmt(value - reference)} (reference 0)"
+    return f"{100 * (value / reference - 1):+.{digits}f} %"
+
+
 def output_units(variant: str) -> dict[str, str]:
     """SI unit of each output of ``variant``'s model (``"rad"`` or ``"m"``)."""
     return {s.name: s.unit for s in build_model(variant).outputs}
@@ -219,7 +227,7 @@ def parameter_table(
         if not est.free:
             continue
         ref = thesis.values.get(est.name) if thesis else None
-        diff = f"{100 * (est.estimate / ref - 1):+.2f} %" if ref else "n/a"
+        diff = _relative_difference(est.estimate, ref, 2) if ref is not None else "n/a"
         if not result.success:
             status = "not assessed (fit failed)"
         elif est.at_bound:
@@ -245,7 +253,7 @@ def parameter_table(
             cells = cells[:4] + (f"[{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "n/a",) + cells[4:]
         if truth:
             t = truth.values[est.name]
-            cells += (_fmt(t), f"{100 * (est.estimate / t - 1):+.3f} %")
+            cells += (_fmt(t), _relative_difference(est.estimate, t, 3))
         rows.append(cells)
     return markdown_table(rows)
 

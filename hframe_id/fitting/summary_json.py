@@ -3,7 +3,7 @@
 One JSON object, the same shape for every model::
 
     {"success": true, "message": "...", "model": "emps-axis", "fit_id": "...",
-     "parameter_file": "fits/....yaml" or null, "report": "fits/...-report.md",
+     "parameter_file": "fits/....yaml" or null, "report": "fits/...-report.md" or null (the report failed),
      "parameters": {"M": {"value": 95.1, "unit": "kg", "std": 0.8,
                           "interval_95": [93.5, 96.7], "free": true, "identified": true,
                           "initial": 95.1089}, ...},
@@ -32,7 +32,7 @@ def _number(value: float) -> float | None:
 
 
 def fit_summary(
-    result: FitResult, fit_id: str, parameter_file: Path | None, report: Path
+    result: FitResult, fit_id: str, parameter_file: Path | None, report: Path | None
 ) -> dict[str, Any]:
     """The ``--json`` object of a fit (see the module docstring)."""
     parameters = {}
@@ -66,7 +66,7 @@ def fit_summary(
         "model": result.variant,
         "fit_id": fit_id,
         "parameter_file": str(parameter_file) if parameter_file else None,
-        "report": str(report),
+        "report": str(report) if report else None,
         "parameters": parameters,
         "channels": channels,
         "held": result.held_statement(),

@@ -29,10 +29,11 @@ class Signal:
 class ParameterSpec:
     """One physical parameter of a model variant.
 
-    ``kind`` says which values are physical: ``"positive"`` (masses, stiffnesses, viscous
-    friction, motor constants), ``"nonnegative"`` (Coulomb friction, which is zero in the
-    thesis's linear models) or ``"real"`` (either sign: offsets, biases). A fit estimates
-    positive and nonnegative parameters in log scale, real ones linearly. ``required=False``
+    ``kind`` says which values are physical: ``"positive"`` (masses, stiffnesses, inertias,
+    motor constants), ``"nonnegative"`` (friction, viscous and Coulomb: zero is physical,
+    Coulomb friction is zero in the thesis's linear models) or ``"real"`` (either sign:
+    offsets, biases). A fit estimates positive parameters in log scale, nonnegative and real
+    ones linearly (``linear``), so that a nonnegative one can reach zero. ``required=False``
     marks parameters that only some model options use (belt lengths for position-dependent
     stiffness, section 4.6).
     """
@@ -54,6 +55,12 @@ class ParameterSpec:
     def key(self) -> str:
         """The key used in parameter files: name with unit, e.g. ``"k_l [N/m]"``."""
         return f"{self.name} [{self.unit}]"
+
+    @property
+    def linear(self) -> bool:
+        """True if a fit estimates the parameter linearly (nonnegative: down to 0; real),
+        False for log scale (positive)."""
+        return self.kind != "positive"
 
     @property
     def signed(self) -> bool:

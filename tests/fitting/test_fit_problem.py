@@ -70,9 +70,9 @@ def test_unknown_free_parameter_suggests_the_nearest(hframe, recording):
 
 
 def test_theta_of_inverts_parameters(hframe, recording):
-    """theta -> parameters -> theta is the identity (log scale and signed alike), to rounding."""
+    """theta -> parameters -> theta is the identity (log scale and linear alike), to rounding."""
     problem = build_problem([recording], hframe, FitOptions(free=("k_l", "B_M1", "g_2")))
-    theta = np.array([0.3, -1.2, 0.05])
+    theta = np.array([0.3, -0.8, 0.05])
     values = dict(zip(problem.model.parameter_names, problem.parameters(theta), strict=True))
     assert np.allclose(problem.theta_of(hframe.replace_values(**values)), theta, atol=1e-12)
 
@@ -103,10 +103,21 @@ def test_bounds_excluding_the_initial_value_fail_before_solving(hframe, recordin
         build_problem([recording], hframe, FitOptions(free=("k_r",), bounds={"k_l": (1, 2e5)}))
 
 
-def test_free_parameter_at_zero_cannot_be_fitted_in_log_scale(hframe, recording):
+def test_friction_is_linear_with_zero_reachable(hframe, recording):
+    """Friction (nonnegative) is fitted linearly from 0, also from a start at 0 (Table 4.1's
+    Coulomb terms): its default box starts at 0, which is physics, not the box; positive
+    parameters keep the log-scale box x/÷ bound_factor."""
     zero = hframe.replace_values(F_c_cart=0.0)
-    with pytest.raises(FitError, match="F_c_cart starts at 0.0"):
-        build_problem([recording], zero, FitOptions())
+    problem = build_problem([recording], zero, FitOptions(free=("F_c_cart", "b_cart", "k_l")))
+    assert problem.linear.tolist() == [True, True, False]
+    p = problem.parameters(problem.theta_lower)
+    names = problem.model.parameter_names
+    assert p[names.index("F_c_cart")] == 0.0 and p[names.index("b_cart")] == 0.0
+    assert p[names.index("k_l")] == pytest.approx(hframe.values["k_l"] / 10)
+    assert problem.zero_floor.tolist() == [True, True, False]
+    assert problem.box_lower.tolist() == [False, False, True]
+    assert problem.on_box(problem.theta_upper).all()
+    assert not problem.on_box(problem.theta_lower)[:2].any()
 
 
 def test_mixed_variants_and_rigs_are_refused(hframe, recording):

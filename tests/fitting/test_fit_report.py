@@ -121,7 +121,11 @@ def test_sensor_weighted_fit_has_no_mismatch_statement(mismatched):
 
 
 @pytest.mark.parametrize("plot", ["plot_experiment", "plot_correlation"])
-def test_a_crash_while_writing_leaves_no_files(mismatched, tmp_path, monkeypatch, plot):
+def test_a_crash_while_writing_the_report_keeps_the_fit(
+    mismatched, tmp_path, monkeypatch, capsys, plot
+):
+    """The parameter file is the fit: a report that fails is a warning, leaves nothing of
+    itself (no report, no plots folder), and never takes the parameter file with it."""
     from hframe_id.cli.fit_command import _write_outputs
 
     def broken(*args, **kwargs):
@@ -129,18 +133,21 @@ def test_a_crash_while_writing_leaves_no_files(mismatched, tmp_path, monkeypatch
 
     monkeypatch.setattr(report_module, plot, broken)
     result, recordings = mismatched
+    assert result.success, result.message
     initial = MODELS / "hframe-8-table4.2.yaml"
     data = tmp_path / "h20_xmotion.mcap"
     data.write_bytes(b"stands in for the recording (hashed for the fit id)")
     out = tmp_path / "fits"
-    with pytest.raises(RuntimeError, match="disk on fire"):
-        _write_outputs(result, recordings, [data], initial, out, None, InlineDrawer())
-    # the parameter file written before the report is removed again, and the folder made for it
-    assert not out.exists()
-    out.mkdir()
-    with pytest.raises(RuntimeError, match="disk on fire"):
-        _write_outputs(result, recordings, [data], initial, out, None, InlineDrawer())
-    assert out.is_dir() and not list(out.iterdir())
+    fit_id, parameter_file, report = _write_outputs(
+        result, recordings, [data], initial, out, None, InlineDrawer()
+    )
+    assert report is None
+    assert sorted(p.name for p in out.iterdir()) == [f"{fit_id}.yaml"]
+    assert parameter_file == out / f"{fit_id}.yaml"
+    assert load_parameter_file(parameter_file).values == pytest.approx(result.parameters.values)
+    warning = capsys.readouterr().err
+    assert "warning: the report was not written" in warning and "disk on fire" in warning
+    assert str(parameter_file) in warning
 
 
 @pytest.mark.parametrize("module", ["hframe_id.fitting.report", "hframe_id.fleet.report"])
@@ -180,3 +187,17 @@ def test_estimated_noise_that_ends_at_the_sensor_level_states_no_mismatch(mismat
     assert levels["model_mismatch"] is False and levels["weights"] == "estimated from the residuals"
     channels["y"] = {**channels["y"], "residual_rms_sensor_std": 3.1}
     assert "does not follow the data" in mismatch_statement(at_sensor_level)
+
+
+def test_a_reference_of_zero_gets_an_absolute_difference(mismatched):
+    """Table 4.1's Coulomb friction is 0: against it (as reference or truth) the table shows
+    the absolute difference, not a division by zero (a linear plant's report crashed)."""
+    from hframe_id.fitting.report import parameter_table
+
+    result, _ = mismatched
+    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+    zero = SimpleNamespace(values={**table.values, "k_l": 0.0})  # no file may hold it
+    rows = parameter_table(result, zero, "a zero", zero)
+    line = next(row for row in rows if row.startswith("| k_l [N/m]"))
+    assert line.count("(reference 0)") == 2
+    assert "%" not in line.split("|")[5]

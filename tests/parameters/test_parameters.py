@@ -135,7 +135,8 @@ def test_missing_parameter(tmp_path):
         ("J_M1 [kg m^2]", float("-inf"), "-inf"),
         ("M_cart [kg]", 0.0, "0.0"),
         ("M_cart [kg]", -1.0412, "-1.0412"),
-        ("b_bridge [N s/m]", 0, "0"),
+        ("k_b [N/m]", 0, "0"),
+            ("b_bridge [N s/m]", -1.0, "-1.0"),
         ("r [m]", "0.0194 m", "'0.0194 m'"),
         ("K_t [N m/A]", True, "True"),
         ("R [ohm]", None, "None"),
@@ -151,9 +152,12 @@ def test_negative_coulomb_friction(tmp_path, key):
     assert "> 0," not in message
 
 
-def test_zero_coulomb_friction_is_allowed(tmp_path):
-    params = load_parameter_file(_write(tmp_path, _set("tau_cM1 [N m]", 0.0)))
-    assert params.values["tau_cM1"] == 0.0
+@pytest.mark.parametrize("key", ["tau_cM1 [N m]", "b_cart [N s/m]", "B_M2 [N m s/rad]"])
+def test_zero_friction_is_allowed(tmp_path, key):
+    """Friction, Coulomb and viscous, is nonnegative: zero is physical (a linear model's
+    Coulomb terms, a well-lubricated rig)."""
+    params = load_parameter_file(_write(tmp_path, _set(key, 0.0)))
+    assert params.values[key.split(" ")[0]] == 0.0
 
 
 def test_wrong_variant_for_the_caller(tmp_path):

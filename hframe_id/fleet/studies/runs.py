@@ -91,7 +91,7 @@ def study_setup(
     parameter's bounds set from the initial file (the fit's default bounds, p0 x/÷
     ``bound_factor``, or p0 -/+ ``bound_factor`` |p0| for signed ones), so that a start drawn
     elsewhere solves the same problem."""
-    from hframe_id.fitting.problem import resolve_free
+    from hframe_id.fitting.problem import default_bounds, resolve_free
     from hframe_id.models import build_model, declaration
     from hframe_id.parameters import load_parameter_file
 
@@ -121,11 +121,8 @@ def study_setup(
     for name in names:
         if name in bounds:
             continue
-        p0 = initial.values[name]
-        if built.parameters[built.parameter_names.index(name)].signed:
-            bounds[name] = (p0 - f * abs(p0), p0 + f * abs(p0)) if p0 else (-f, f)
-        else:
-            bounds[name] = (p0 / f, p0 * f)
+        kind = built.parameters[built.parameter_names.index(name)].kind
+        bounds[name] = default_bounds(kind, initial.values[name], f)
     options = dataclasses.replace(options, bounds=bounds)
     return StudySetup(tuple(resolved), initial, options, names, bounds)
 
