@@ -201,6 +201,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "records, docs/fitting.md)",
     )
     parser.add_argument(
+        "--initial-state",
+        choices=("auto", "rest", "estimate"),
+        default="auto",
+        help="each recording's initial state: at rest (velocities zero, belts unstretched, "
+        "at the first measured positions: what validate and simulate start from) where the "
+        "record starts at rest, estimated where it starts in motion (auto); every one at "
+        "rest; or every one estimated",
+    )
+    parser.add_argument(
+        "--known",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="a parameter file of the fitted model the fit must not end worse than (besides "
+        "its start, the equation-error estimate and the model's reference files): ended "
+        "worse, it continues from the best of them, or fails saying so; repeatable",
+    )
+    parser.add_argument(
         "--no-first-stage",
         action="store_true",
         help="skip the equation-error start and the stages on the moving windows (start the "
@@ -339,6 +357,7 @@ def _options(args: argparse.Namespace) -> FitOptions:
             _float(p, "--smoothing-schedule") for p in _names(args.smoothing_schedule)
         ),
         first_stage=not args.no_first_stage,
+        initial_state=args.initial_state,
         max_iterations=args.max_iterations,
         step_tol=args.step_tol,
         defect_tol=args.defect_tol,
@@ -500,6 +519,11 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
     if not model:
         initial, initial_path = _initial(args, variant)
     options = _with_model_defaults(options, args, variant)
+    if args.known:
+        from hframe_id.parameters import load_parameter_file
+
+        known = tuple(load_parameter_file(Path(p), variant=variant) for p in args.known)
+        options = dataclasses.replace(options, known_points=known)
     return paths, recordings, initial, initial_path, variant, options
 
 

@@ -56,8 +56,7 @@ def identifying_designs(
     options = problem.options
     all_free = np.ones(len(problem.free), dtype=bool)
     jac, _, _ = gn.condensed_jacobian(state.evaluation, state.nodes, all_free)
-    n_nuisance = ms.nx * len(problem.experiments)
-    info_data = _reduced_information(jac, n_nuisance)
+    info_data = _reduced_information(jac, ms.n_nuisance)
     ratio = 1.0
     if stats.relative_std_gn.size:
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -158,4 +157,4 @@ def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.nd
     gn = GaussNewton(ms)
     ev = ms.evaluate(nodes, np.zeros(len(sub.free)), sub.smoothing)
     jac, _, _ = gn.condensed_jacobian(ev, nodes, np.ones(len(sub.free), dtype=bool))
-    return _reduced_information(jac, ms.nx)
+    return _reduced_information(jac, ms.n_nuisance)

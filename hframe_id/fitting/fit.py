@@ -37,6 +37,7 @@ import numpy as np
 
 from hframe_id.fitting.consider import consider_covariance
 from hframe_id.fitting.equation_error import equation_error_start
+from hframe_id.fitting.known_points import known_points, reference_sets, simulation_criterion
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
 from hframe_id.fitting.options import (
     HELD_PRIOR_RELATIVE_STD,
@@ -238,6 +239,33 @@ class FitResult:
             )
         return " ".join(sentences) or None
 
+    @property
+    def initial_state_statement(self) -> str | None:
+        """Which recordings started at rest (their initial state known) and which had theirs
+        estimated (``FitOptions.initial_state``)."""
+        if self.problem is None:
+            return None
+        rest = [e.name for e in self.problem.experiments if e.initial_state is not None]
+        estimated = [e.name for e in self.problem.experiments if e.initial_state is None]
+        parts = [f"at rest: {', '.join(rest)}"] if rest else []
+        parts += [f"estimated: {', '.join(estimated)}"] if estimated else []
+        return "initial states " + "; ".join(parts)
+
+    @property
+    def known_points_statement(self) -> str | None:
+        """The simulation criterion of the fit against the points it knows
+        (``hframe_id.fitting.known_points``), or None if they were not compared."""
+        points = self.diagnostics.get("known_points")
+        if not points:
+            return None
+        own = points["fit"]
+        others = {k: v for k, v in points.items() if k != "fit"}
+        label = min(others, key=others.get)
+        return (
+            f"simulation criterion from the recordings' start (chi^2 / 2 under the fit's "
+            f"noise levels): {own:.6g}; the best known point, {label}: {others[label]:.6g}"
+        )
+
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted, 95 % interval, the jackknife's
         95 % interval (after a cross-validation), status (identified, held, at bound, poorly
@@ -269,6 +297,7 @@ class FitResult:
                 f"{est.key:<22} {est.initial:>11.5g} {est.estimate:>11.5g} "
                 f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]{extra}  {status}"
             )
+        lines += [s for s in (self.initial_state_statement, self.known_points_statement) if s]
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "
             f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} noise std, "
@@ -316,7 +345,7 @@ def _scaled(smoothing: tuple[float, float], factor: float) -> tuple[float, float
 def _stats(gn: GaussNewton, state: SolverState, problem: FitProblem) -> Statistics:
     ev = state.evaluation
     jac, residual, blocks = gn.condensed_jacobian(ev, state.nodes, state.active)
-    n_nuisance = gn.ms.nx * len(problem.experiments)
+    n_nuisance = gn.ms.n_nuisance
     names = tuple(n for n, a in zip(problem.free_names, state.active, strict=True) if a)
     return compute_statistics(jac, residual, blocks, n_nuisance, names, problem.options.uncertainty)
 
@@ -371,6 +400,16 @@ def fit_recordings(
     """
     options = options or FitOptions()
     start = time.perf_counter()
+    result = _fit_widening(recordings, initial, options)
+    if result.success:
+        result = _never_worse_than_known(recordings, initial, options, result)
+    result.wall_time_s = time.perf_counter() - start
+    return result
+
+
+def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
+    """The fit within the default box, repeated with the box widened while it ends on it
+    (``BOX_WIDENINGS``); still on it after that, a failure saying so."""
     for _ in range(BOX_WIDENINGS):
         result = _fit_in_box(recordings, initial, options)
         if not result.diagnostics["at_default_box"]:
@@ -388,8 +427,80 @@ def fit_recordings(
                 "widenings (the data push them further: a start closer to the rig, or "
                 "--bounds, decides instead); " + result.message,
             )
-    result.wall_time_s = time.perf_counter() - start
     return result
+
+
+def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, result):
+    """(label, parameter set) of the points a fit must not end worse than
+    (``known_points``): the start, the equation-error estimate, the model's reference files
+    and the user's ``FitOptions.known_points``; sets equal in their free values once."""
+    problem = result.problem
+    ms = MultipleShooting(problem)
+    ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
+    regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+    values = problem.parameters(regressed)
+    estimate = initial.replace_values(
+        **{n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
+    )
+    candidates = [
+        ("the start", initial),
+        ("the equation-error estimate", estimate),
+        *reference_sets(initial.variant),
+        *((f"known point {i + 1} ({p.title})", p) for i, p in enumerate(options.known_points)),
+    ]
+    unique, seen = [], set()
+    for label, given in candidates:
+        # Within the fit's box (the user's bounds hold for every point it may continue from).
+        theta = np.clip(problem.theta_of(given), problem.theta_lower, problem.theta_upper)
+        values = problem.parameters(theta)
+        params = initial.replace_values(
+            **{n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
+        )
+        key = tuple(params.values[n] for n in problem.free_names)
+        if key not in seen:
+            seen.add(key)
+            unique.append((label, params))
+    return unique
+
+
+def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
+    """The fit judged against the points it knows (``known_points``) by the criterion of its
+    written file (a simulation from rest, ``known_points.simulation_criterion``): ended worse
+    than one, it continues from the best of them; worse still, it fails saying so."""
+    std = dict(result.diagnostics["channel_std"])
+    latency = dict(options.latency_samples)
+    free = result.problem.free_names
+    starts = [
+        None if e.initial_state is not None else x0
+        for e, x0 in zip(result.problem.experiments, result.initial_states, strict=True)
+    ]
+
+    def criterion(params):
+        return simulation_criterion(params, recordings, std, latency, starts)
+
+    own = criterion(result.parameters)
+    candidates = _known_candidates(recordings, initial, options, result)
+    points = known_points(initial, free, candidates, recordings, std, latency, starts)
+    best = points[0]
+    report = {"fit": own, **{p.label: p.criterion for p in points}}
+    if best.criterion >= own:
+        result.diagnostics["known_points"] = report
+        return result
+    again = _fit_widening(recordings, best.parameters, options)
+    continued = criterion(again.parameters) if again.success else math.inf
+    report[f"fit continued from {best.label}"] = continued
+    if continued <= best.criterion:
+        again.diagnostics["known_points"] = report
+        again.message += f"; continued from {best.label}, where the first fit ended worse"
+        return again
+    result.diagnostics["known_points"] = report
+    return replace(
+        result,
+        success=False,
+        message=f"did not converge: the fit ends worse than {best.label} (simulation "
+        f"criterion {own:.6g} against {best.criterion:.6g}, chi^2 / 2 under the fit's noise "
+        f"levels), and a fit continued from there ends at {continued:.6g}",
+    )
 
 
 def _fit_in_box(
@@ -492,7 +603,7 @@ def _linear_consider_variances(problem, recordings, state, result, held, prior) 
     theta = np.zeros(len(widened.free))
     ev = ms.evaluate(state.nodes, theta, widened.smoothing)
     jac, _, _ = GaussNewton(ms).condensed_jacobian(ev, state.nodes, np.ones(theta.size, bool))
-    n_estimated = ms.nx * len(widened.experiments) + len(result.free_names)
+    n_estimated = ms.n_nuisance + len(result.free_names)
     added = consider_covariance(
         jac[:, :n_estimated], jac[:, n_estimated:], np.array([prior[n] for n in held])
     )

@@ -32,7 +32,8 @@ def jackknife_interval(
 ) -> tuple[float, float]:
     """The ``confidence`` interval of ``value`` (SI, non-zero unless ``signed``) from its
     jackknife std [SI] over ``folds`` (>= 2) folds: symmetric in log(value), or linear for a
-    parameter fitted linearly (``signed``: ``ParameterSpec.linear``) (``fit.spread`` with Student's t for z)."""
+    parameter fitted linearly (``signed``: ``ParameterSpec.linear``); ``fit.spread`` with
+    Student's t for z."""
     t = student_t_quantile(0.5 + confidence / 2, folds - 1)
     theta_std = jackknife_std if signed else jackknife_std / abs(value)
     return spread(value, theta_std, signed, 1.0, t)[2]

@@ -399,8 +399,14 @@ def solve_nlp(
         solver = nlp.nlpsol(settings)
         build_time += time.perf_counter() - built
         x0 = np.concatenate([(nodes / ms.defect_scale).ravel(), theta[active]])
-        lower = np.concatenate([np.full(nodes.size, -np.inf), problem.theta_lower[active]])
-        upper = np.concatenate([np.full(nodes.size, np.inf), problem.theta_upper[active]])
+        # Known nodes (a record's start at rest) are fixed: equal bounds.
+        known = np.where(ms.fixed_node[:, None], nodes / ms.defect_scale, np.nan).ravel()
+        lower = np.concatenate(
+            [np.where(np.isnan(known), -np.inf, known), problem.theta_lower[active]]
+        )
+        upper = np.concatenate(
+            [np.where(np.isnan(known), np.inf, known), problem.theta_upper[active]]
+        )
         n_g = nlp.defects.shape[0]
         solution = solver(x0=x0, lbx=lower, ubx=upper, lbg=np.zeros(n_g), ubg=np.zeros(n_g))
         stats = solver.stats()

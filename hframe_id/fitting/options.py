@@ -23,6 +23,7 @@ UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
 SOLVERS = ("gauss-newton", "ipopt")
 CONTINUITY = ("exact", "none")
+INITIAL_STATES = ("auto", "rest", "estimate")
 CONSIDER_METHODS = ("linear", "refit", "prior")
 
 
@@ -61,6 +62,8 @@ class ProblemOptions:
     smoothing: tuple[float, float] | None
     consider: Mapping[str, float] | None
     consider_method: str
+    initial_state: str
+    shooting_interval: int
 
 
 @dataclass(frozen=True)
@@ -163,6 +166,13 @@ class FitOptions:
         length. For plants whose open-loop simulation drifts (integrators under closed-loop
         control, the EMPS axis): a short horizon limits the drift's bias, a long one the
         noise's influence (docs/real-data.md).
+    initial_state : each recording's initial state. ``"auto"`` (default): at rest (every
+        velocity zero, the belts unstretched, at the first sample's measured positions:
+        what ``hframe-id validate`` and ``simulate`` start from) where the record's first
+        shooting window shows rest (``problem.starts_at_rest``), estimated where it starts
+        in motion; ``"rest"``: every record at rest; ``"estimate"``: every initial state
+        estimated. A free initial state can absorb model error that the written file,
+        simulated from rest, then shows (issue 25).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
         the model's (1e-3 m/s, 1e-2 rad/s).
     smoothing_schedule : continuation: factors applied to ``smoothing`` in the stages on the
@@ -202,6 +212,9 @@ class FitOptions:
     threads : worker threads for evaluating shooting windows.
     verbose : 0 silent, 1 one line per iteration (to ``progress`` or stderr).
     progress : callable receiving :class:`FitProgress` after every iteration.
+    known_points : parameter sets of the fitted model (``hframe-id fit --known FILE``) the fit
+        must not end worse than, besides its start, the equation-error estimate and the
+        model's reference files (``hframe_id.fitting.known_points``).
     """
 
     free: tuple[str, ...] | None = None
@@ -216,6 +229,7 @@ class FitOptions:
     consider_method: str = "linear"
     shooting_interval: int = 10
     continuity: str = "exact"
+    initial_state: str = "auto"
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
     first_stage: bool = True
@@ -232,6 +246,7 @@ class FitOptions:
     threads: int = field(default_factory=lambda: max(1, min(os.cpu_count() or 1, 8)))
     verbose: int = 0
     progress: Callable[[FitProgress], None] | None = None
+    known_points: tuple[Any, ...] = ()  # ParameterSet objects
 
     def __post_init__(self) -> None:
         for name in ("free", "fix"):
@@ -329,6 +344,11 @@ class FitOptions:
             )
         if self.solver not in SOLVERS:
             raise OptionError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        if self.initial_state not in INITIAL_STATES:
+            raise OptionError(
+                f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
+                f"got {self.initial_state!r}"
+            )
         if self.continuity not in CONTINUITY:
             raise OptionError(
                 f"continuity must be one of {', '.join(CONTINUITY)}, got {self.continuity!r}"
@@ -349,6 +369,14 @@ class FitOptions:
             raise OptionError(f"verbose must be 0, 1 or 2, got {self.verbose!r}")
         if self.progress is not None and not callable(self.progress):
             raise OptionError("progress must be callable (FitProgress) -> None")
+        from hframe_id.parameters import ParameterSet
+
+        object.__setattr__(self, "known_points", tuple(self.known_points))
+        for params in self.known_points:
+            if not isinstance(params, ParameterSet):
+                raise OptionError(
+                    f"known_points must be ParameterSet objects, got {type(params).__name__}"
+                )
 
     @property
     def problem_options(self) -> ProblemOptions:
@@ -388,6 +416,7 @@ class FitOptions:
             "consider_method": self.consider_method,
             "shooting_interval_samples": int(self.shooting_interval),
             "continuity": self.continuity,
+            "initial_state": self.initial_state,
             "smoothing": list(self.smoothing) if self.smoothing else "model default",
             "smoothing_schedule": list(self.smoothing_schedule),
             "first_stage": bool(self.first_stage),
@@ -397,6 +426,7 @@ class FitOptions:
             "defect_tol": float(self.defect_tol),
             "identifiability_threshold": float(self.identifiability_threshold),
             "max_misfit": float(self.max_misfit),
+            "known_points": [p.title for p in self.known_points],
             "uncertainty": self.uncertainty,
             "confidence": float(self.confidence),
             "substep_safety": float(self.substep_safety),

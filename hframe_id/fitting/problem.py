@@ -15,7 +15,7 @@ import difflib
 import fnmatch
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -40,6 +40,11 @@ RIG_IDENTITY_KEYS = (
     "dac_bits",
 )
 
+#: A record starts at rest (``starts_at_rest``) unless some channel's velocity at its first
+#: sample, fitted over the first shooting window, differs from zero by more than this many
+#: of its standard errors (a two-sided test at 0.27 % per channel).
+REST_Z = 3.0
+
 #: A window needs at least this many valid output values per free quantity it brings; a
 #: whole record needs this many valid values per estimated quantity (states + parameters).
 MIN_VALID_PER_UNKNOWN = 5
@@ -54,6 +59,9 @@ class Experiment:
     outputs: np.ndarray  # (N, n_y) measurements, NaN where missing
     valid: np.ndarray  # (N, n_y) bool: usable samples
     recording: Recording
+    #: (n_x,) the state the record starts in where it is known, at rest (``rest_state``);
+    #: None where it is estimated (``FitOptions.initial_state``)
+    initial_state: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -364,6 +372,46 @@ def _prepare(rec: Recording, model: Model, latency: dict[str, int]) -> Experimen
     return Experiment(rec.name(), inputs, np.where(valid, outputs, np.nan), valid, rec)
 
 
+def starts_at_rest(
+    experiment: Experiment, channel_std: np.ndarray, samples: int, dt: float
+) -> bool:
+    """Whether the record shows rest at its start: per channel, y = a + b t + c t^2 fitted
+    to its valid samples among the first ``samples``, and no |b| above ``REST_Z`` of its
+    standard error (white noise of ``channel_std`` [SI]). A step from rest accelerates
+    (c), a record cut in motion starts with a velocity (b). Too few samples to tell: at rest
+    is not assumed."""
+    t = np.arange(min(samples, experiment.n_samples)) * dt
+    design = np.stack([np.ones_like(t), t, t**2], axis=1)
+    for j in range(experiment.outputs.shape[1]):
+        valid = experiment.valid[: t.size, j]
+        if np.count_nonzero(valid) <= design.shape[1]:
+            return False
+        a = design[valid]
+        coef, *_ = np.linalg.lstsq(a, experiment.outputs[: t.size, j][valid], rcond=None)
+        std = channel_std[j] * math.sqrt(np.linalg.inv(a.T @ a)[1, 1])
+        if abs(coef[1]) > REST_Z * std:
+            return False
+    return True
+
+
+def _with_initial_state(experiment: Experiment, model: Model, p: np.ndarray, std, options):
+    """``experiment`` with its known initial state (at rest) per ``options.initial_state``:
+    the state ``hframe-id validate`` simulates from (``validation.replay.rest_state``)."""
+    rest = options.initial_state == "rest" or (
+        options.initial_state == "auto"
+        and starts_at_rest(
+            experiment, std, options.shooting_interval, float(experiment.recording.sample_period_s)
+        )
+    )
+    if not rest:
+        return experiment
+    # Imported here: the replay's channels are validation's (which imports this module).
+    from hframe_id.validation.replay import channels, rest_state
+
+    state = rest_state(model, p, channels(model, experiment.recording))
+    return replace(experiment, initial_state=state)
+
+
 def build_problem(
     recordings: Sequence[Recording], initial: ParameterSet, options: FitOptions
 ) -> FitProblem:
@@ -418,7 +466,7 @@ def build_problem(
             )
         if kind == "nonnegative" and not value >= 0:
             raise FitError(f"free parameter {name} starts at {float(value)!r}; it must be >= 0")
-        low, high = default = default_bounds(kind, value, wanted.bound_factor)
+        low, high = default_bounds(kind, value, wanted.bound_factor)
         given = name in wanted.bounds
         if given:
             low, high = wanted.bounds[name]
@@ -428,7 +476,9 @@ def build_problem(
                 "0 < low"
             )
         if kind == "nonnegative" and not low >= 0:
-            raise FitError(f"bounds for {name} [{low:g}, {high:g}]: a {kind} parameter needs 0 <= low")
+            raise FitError(
+                f"bounds for {name} [{low:g}, {high:g}]: a {kind} parameter needs 0 <= low"
+            )
         if not low <= value <= high:
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}] exclude its initial value {value:g}"
@@ -465,6 +515,8 @@ def build_problem(
             for name in outputs
         ]
     )
+    sensor_std = np.array([default_channel_std(recordings[0], name) for name in outputs])
+    experiments = tuple(_with_initial_state(e, model, p0, sensor_std, wanted) for e in experiments)
     quantization = np.array([encoder_step(recordings[0], name) for name in outputs])
     n_unknown = model.n_states * len(experiments) + len(free)
     n_valid = int(sum(e.valid.sum() for e in experiments))

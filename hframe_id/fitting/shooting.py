@@ -127,6 +127,15 @@ class MultipleShooting:
             self.transcription.continuity == "exact"
         )
         self.window_index_in_experiment = self.window_start // m
+        #: (W,) True for a window whose node is known, not estimated: an experiment's first
+        #: window where the record starts at rest (``Experiment.initial_state``)
+        self.fixed_node = np.array(
+            [
+                k0 == 0 and problem.experiments[e].initial_state is not None
+                for e, k0 in zip(exp_of, start, strict=True)
+            ],
+            dtype=bool,
+        )
         self.first_window = np.array(
             [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]
         )
@@ -168,6 +177,7 @@ class MultipleShooting:
             "window_start",
             "window_length",
             "window_index_in_experiment",
+            "fixed_node",
             "inputs",
             "measured",
             "weight",
@@ -190,6 +200,19 @@ class MultipleShooting:
         view._buffers = {}
         view.uniform_substeps = True
         return view
+
+    @property
+    def estimated_experiments(self) -> np.ndarray:
+        """Indices of the experiments whose initial state is estimated (not at rest)."""
+        return np.array(
+            [e for e, exp in enumerate(self.problem.experiments) if exp.initial_state is None],
+            dtype=int,
+        )
+
+    @property
+    def n_nuisance(self) -> int:
+        """Estimated initial-state entries (the statistics' nuisance parameters)."""
+        return self.nx * len(self.estimated_experiments)
 
     def residual_rms(self, cost: float) -> float:
         """Residual rms over the valid samples, in units of each channel's noise std, of a
@@ -254,6 +277,8 @@ class MultipleShooting:
             nodes[windows, : self.nq] = positions[k0]
             nodes[windows, self.nq :] = rates[k0]
             velocity[windows] = rates[np.minimum(k0[:, None] + np.arange(self.m + 1), n - 1)]
+            if exp.initial_state is not None:
+                nodes[windows[0]] = exp.initial_state
         return nodes, velocity
 
     def _rigid_fit(self, design, modes, y, weights) -> np.ndarray:

@@ -250,9 +250,13 @@ class GaussNewton:
         np.add.at(g_s, segment, ge[:, :nx])
         h_pp = he[:, nx:, nx:].sum(axis=0)
         g_p = ge[:, nx:].sum(axis=0)
+        # A segment that starts at a known state (at rest) has no first-node step.
+        fixed = self.ms.fixed_node[np.flatnonzero(np.r_[True, ~links])]
+        h_sp[fixed], g_s[fixed] = 0.0, 0.0
         # Eliminate the segments' first-node steps (block diagonal) by a Schur complement.
         damping = self.node_damping
         h_ss_d = _damped(h_ss, damping) + np.diag(self.prox)
+        h_ss_d[fixed] = np.eye(nx)
         k = np.linalg.solve(h_ss_d, np.concatenate([h_sp, g_s[:, :, None]], axis=2))
         k_sp, k_g = k[:, :, :-1], k[:, :, -1]
         h_red = h_pp - np.einsum("sij,sik->jk", h_sp, k_sp)
@@ -296,15 +300,15 @@ class GaussNewton:
         """The single-shooting Jacobian at a continuous solution, from the window
         sensitivities chained along each experiment.
 
-        Returns (J, r, blocks): J (n_valid, n_x * experiments + n_free) with each
-        experiment's initial-state columns first, r the weighted residuals, and blocks
+        Returns (J, r, blocks): J (n_valid, ``ms.n_nuisance`` + n_free) with the
+        initial-state columns of each experiment whose initial state is estimated first, r
+        the weighted residuals, and blocks
         (label "experiment:channel", row indices in time order) for the HAC estimator; a
         prior (``FitProblem.prior_weight``) adds a row and a block "prior:name" at the end.
         """
         ms = self.ms
         w, m, ny, nx = ev.jac_node.shape
         nf = int(free.sum())
-        n_exp = len(self.problem.experiments)
         jp_all = ev.jac_theta[..., free]
         b_all = ev.b_end[:, :, free]
         gains = np.zeros((w, nx, nx + nf))
@@ -318,11 +322,13 @@ class GaussNewton:
                 gmat[:, nx:] += b_all[i]
         jc = np.einsum("wkji,wil->wkjl", ev.jac_node, gains)
         jc[..., nx:] += jp_all
-        full = np.zeros((w, m, ny, nx * n_exp + nf))
-        for e in range(n_exp):
+        estimated = ms.estimated_experiments
+        n_nuisance = ms.n_nuisance
+        full = np.zeros((w, m, ny, n_nuisance + nf))
+        for column, e in enumerate(estimated):
             idx = ms.window_experiment == e
-            full[idx, :, :, e * nx : (e + 1) * nx] = jc[idx, :, :, :nx]
-        full[..., nx * n_exp :] = jc[..., nx:]
+            full[idx, :, :, column * nx : (column + 1) * nx] = jc[idx, :, :, :nx]
+        full[..., n_nuisance:] = jc[..., nx:]
         valid = ms.weight > 0
         order = np.arange(w * m * ny).reshape(w, m, ny)
         rows = order[valid]
@@ -354,7 +360,7 @@ class GaussNewton:
         if not prior.size:
             return jac, residual, blocks
         rows = np.zeros((prior.size, jac.shape[1]))
-        rows[np.arange(prior.size), nx * n_exp + prior] = w[prior]
+        rows[np.arange(prior.size), n_nuisance + prior] = w[prior]
         free_names = np.array(self.problem.free_names)[free]
         for i, k in enumerate(prior):
             blocks.append(
@@ -407,6 +413,11 @@ class GaussNewton:
         h_pp = np.einsum("wri,wrj->ij", jp, jp) + np.einsum("w,wki,wkj->ij", mu, b, b)
         g_p = np.einsum("wri,wr->i", jp, r) + np.einsum("w,wki,wk->i", mu, b, d)
         diag_d = _damped(diag, self.node_damping) + np.diag(self.prox)[None]
+        # Known nodes (a record's start at rest) do not move: no coupling, no step.
+        fixed = ms.fixed_node
+        diag_d[fixed], cross[fixed], grad[fixed] = np.eye(nx), 0.0, 0.0
+        upper[fixed] = 0.0
+        upper[np.flatnonzero(fixed[1:])] = 0.0
         # Block Thomas: solve H_ss X = [cross, grad] for all right-hand sides at once.
         rhs = np.concatenate([cross, grad[:, :, None]], axis=2)
         c_prime = np.empty((w, nx, nx))

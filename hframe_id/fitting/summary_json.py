@@ -3,7 +3,8 @@
 One JSON object, the same shape for every model::
 
     {"success": true, "message": "...", "model": "emps-axis", "fit_id": "...",
-     "parameter_file": "fits/....yaml" or null, "report": "fits/...-report.md" or null (the report failed),
+     "parameter_file": "fits/....yaml" or null,
+     "report": "fits/...-report.md" or null (the report failed),
      "parameters": {"M": {"value": 95.1, "unit": "kg", "std": 0.8,
                           "interval_95": [93.5, 96.7], "free": true, "identified": true,
                           "initial": 95.1089}, ...},

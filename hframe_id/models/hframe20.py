@@ -40,7 +40,10 @@ PARAMETERS = (
     *(ParameterSpec(f"J_{i}", "kg m^2", f"inertia of pulley {i}") for i in PULLEYS),
     ParameterSpec("M_cart", "kg", "mass of the cart (y motion)"),
     ParameterSpec("M_bridge", "kg", "mass of the bridge with cart and pulleys (x motion)"),
-    *(ParameterSpec(f"B_{i}", "N m s/rad", f"viscous friction of pulley {i}", "nonnegative") for i in PULLEYS),
+    *(
+        ParameterSpec(f"B_{i}", "N m s/rad", f"viscous friction of pulley {i}", "nonnegative")
+        for i in PULLEYS
+    ),
     ParameterSpec("b_cart", "N s/m", "viscous friction of the cart", "nonnegative"),
     ParameterSpec("b_bridge", "N s/m", "viscous friction of the bridge", "nonnegative"),
     *(

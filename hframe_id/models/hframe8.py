@@ -41,8 +41,12 @@ PARAMETERS = (
     ParameterSpec("J_M2", "kg m^2", "lumped inertia at motor pulley 2 (eq. 4.2)"),
     ParameterSpec("M_cart", "kg", "cart mass with lumped bridge-pulley inertia (eq. 4.3)"),
     ParameterSpec("M_bridge", "kg", "mass of the bridge with cart (x motion)"),
-    ParameterSpec("B_M1", "N m s/rad", "viscous friction at motor pulley 1 (eq. 4.4)", "nonnegative"),
-    ParameterSpec("B_M2", "N m s/rad", "viscous friction at motor pulley 2 (eq. 4.4)", "nonnegative"),
+    ParameterSpec(
+        "B_M1", "N m s/rad", "viscous friction at motor pulley 1 (eq. 4.4)", "nonnegative"
+    ),
+    ParameterSpec(
+        "B_M2", "N m s/rad", "viscous friction at motor pulley 2 (eq. 4.4)", "nonnegative"
+    ),
     ParameterSpec("b_cart", "N s/m", "viscous friction of the cart (eq. 4.5)", "nonnegative"),
     ParameterSpec("b_bridge", "N s/m", "viscous friction of the bridge", "nonnegative"),
     ParameterSpec("tau_cM1", "N m", "Coulomb friction torque at motor pulley 1", "nonnegative"),

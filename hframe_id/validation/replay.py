@@ -106,8 +106,11 @@ def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
     return x0
 
 
-def simulate_channels(params: ParameterSet, recording: Recording) -> tuple[Channels, np.ndarray]:
-    """The recording's channels for ``params``'s model and their open-loop simulation.
+def simulate_channels(
+    params: ParameterSet, recording: Recording, x0: np.ndarray | None = None
+) -> tuple[Channels, np.ndarray]:
+    """The recording's channels for ``params``'s model and their open-loop simulation, from
+    ``x0`` (default: ``rest_state``).
 
     Returns
     -------
@@ -118,7 +121,6 @@ def simulate_channels(params: ParameterSet, recording: Recording) -> tuple[Chann
     model = build_model(params.variant)
     p = model.parameter_vector(params.values)
     data = channels(model, recording)
-    states = simulate(model, p, data.inputs, data.sample_period_s, x0=rest_state(model, p, data))[
-        :-1
-    ]
+    start = rest_state(model, p, data) if x0 is None else x0
+    states = simulate(model, p, data.inputs, data.sample_period_s, x0=start)[:-1]
     return data, states @ output_matrix(model).T

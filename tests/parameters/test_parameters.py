@@ -136,7 +136,7 @@ def test_missing_parameter(tmp_path):
         ("M_cart [kg]", 0.0, "0.0"),
         ("M_cart [kg]", -1.0412, "-1.0412"),
         ("k_b [N/m]", 0, "0"),
-            ("b_bridge [N s/m]", -1.0, "-1.0"),
+        ("b_bridge [N s/m]", -1.0, "-1.0"),
         ("r [m]", "0.0194 m", "'0.0194 m'"),
         ("K_t [N m/A]", True, "True"),
         ("R [ohm]", None, "None"),

@@ -1,0 +1,119 @@
+"""Never worse than a point the fit knows: the final criterion at other parameter sets.
+
+A local optimizer can stop in a poorer optimum than a point it has seen or could have seen.
+Here the criterion that judges the written parameter file is evaluated at the fit and at
+the points it knows (issue 25, "never worse than a point it knows"):
+
+- the start (``FitResult.initial``),
+- the equation-error estimate (``equation_error.equation_error_start``),
+- the model's reference files (the declaration's reference file and every other parameter
+  file of the same model beside it, e.g. Tables 4.1 and 4.2 for hframe-8),
+- the sets the user names (``FitOptions.known_points``).
+
+The criterion is what ``hframe-id validate`` reproduces: a free-run simulation of each
+training recording from rest at its first measured positions
+(``validation.replay.simulate_channels``), its residuals weighted by the fit's noise levels
+per channel (the sensors' std, or the levels the fit estimated). A record that starts in
+motion starts every point from the fit's estimated initial state (which favours the fit: a
+point that still beats it is better),
+
+    C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2.
+
+Each known point enters with the fit's fixed parameters and its own values of the free ones.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hframe_id.errors import HframeIdError
+from hframe_id.parameters import ParameterSet, load_parameter_file
+from hframe_id.recordings.recording import Recording
+
+
+@dataclass(frozen=True)
+class KnownPoint:
+    """A parameter set the fit is judged against, and its criterion."""
+
+    label: str
+    parameters: ParameterSet
+    criterion: float  # C(p), chi^2 / 2 units; inf where the simulation fails
+
+
+def simulation_criterion(
+    params: ParameterSet,
+    recordings: Sequence[Recording],
+    channel_std: dict[str, float],
+    latency_samples: dict[str, int] | None = None,
+    initial_states: Sequence[np.ndarray | None] | None = None,
+) -> float:
+    """C(p) of ``params`` on ``recordings`` (module docstring); ``channel_std`` [SI] per
+    output; a channel lagging by ``latency_samples`` d is compared at sample k + d with the
+    model at k; ``initial_states`` per recording (None: at rest). inf if the simulation
+    fails or leaves the finite numbers."""
+    from hframe_id.validation.replay import simulate_channels
+
+    latency = latency_samples or {}
+    starts = initial_states or [None] * len(recordings)
+    total = 0.0
+    for recording, x0 in zip(recordings, starts, strict=True):
+        try:
+            data, simulated = simulate_channels(params, recording, x0)
+        except (HframeIdError, ArithmeticError, RuntimeError):
+            return math.inf
+        for j, name in enumerate(data.names):
+            d = int(latency.get(name, 0))
+            n = data.measured.shape[0] - d
+            valid = data.valid[d:, j]
+            residual = (data.measured[d:, j] - simulated[:n, j])[valid] / channel_std[name]
+            total += 0.5 * float(residual @ residual)
+    return total if np.isfinite(total) else math.inf
+
+
+def reference_sets(variant: str) -> list[tuple[str, ParameterSet]]:
+    """The model's reference files: its declaration's reference file and every parameter file
+    of the same model in that file's folder (label: the file name)."""
+    from hframe_id.models import declaration
+
+    reference = declaration(variant).reference_file
+    if reference is None:
+        return []
+    sets = []
+    for path in sorted({reference, *Path(reference).parent.glob("*.yaml")}):
+        try:
+            params = load_parameter_file(path, variant=variant)
+        except HframeIdError:
+            continue  # another model's file, or not a parameter file
+        sets.append((Path(path).name, params))
+    return sets
+
+
+def with_free_values(start: ParameterSet, other: ParameterSet, free: Sequence[str]) -> ParameterSet:
+    """``start`` with the free parameters' values taken from ``other``."""
+    return start.replace_values(**{name: other.values[name] for name in free})
+
+
+def known_points(
+    start: ParameterSet,
+    free: Sequence[str],
+    candidates: Sequence[tuple[str, ParameterSet]],
+    recordings: Sequence[Recording],
+    channel_std: dict[str, float],
+    latency_samples: dict[str, int] | None = None,
+    initial_states: Sequence[np.ndarray | None] | None = None,
+) -> list[KnownPoint]:
+    """Each candidate with ``start``'s fixed parameters and its own free values, and its
+    criterion (``simulation_criterion``), best first."""
+    points = []
+    for label, params in candidates:
+        point = with_free_values(start, params, free)
+        criterion = simulation_criterion(
+            point, recordings, channel_std, latency_samples, initial_states
+        )
+        points.append(KnownPoint(label, point, criterion))
+    return sorted(points, key=lambda p: p.criterion)

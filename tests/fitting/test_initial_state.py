@@ -1,0 +1,91 @@
+"""Initial states: at rest where a record shows rest, estimated where it starts in motion.
+
+What the fit reports must be what ``hframe-id validate`` reproduces from the written file,
+and validate simulates from rest at the first measured positions (issue 25, item 1).
+"""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.known_points import simulation_criterion
+from hframe_id.fitting.problem import build_problem, default_channel_std, starts_at_rest
+from hframe_id.models import build_model
+from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings.simulated import simulate_recording
+from hframe_id.validation.replay import channels, rest_state
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
+
+
+@pytest.fixture(scope="module")
+def table():
+    return load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+
+
+@pytest.fixture(scope="module")
+def step(table):
+    """A 4 V x-motion step from rest (50 samples of pre-roll)."""
+    u = np.zeros((400, 2))
+    u[50:350] = (-4.0, 4.0)
+    return simulate_recording(table, u, seed=7)
+
+
+def _cut(recording, first: int):
+    """The recording from sample ``first`` on: a record that starts in motion."""
+    return dataclasses.replace(
+        recording,
+        time_s=recording.time_s[first:] - recording.time_s[first],
+        inputs=recording.inputs[first:],
+        outputs=recording.outputs[first:],
+        valid=recording.valid[first:],
+    )
+
+
+def _sensor_std(recording, model):
+    return np.array([default_channel_std(recording, s.name) for s in model.outputs])
+
+
+def test_rest_is_told_from_motion_by_the_first_window(table, step):
+    problem = build_problem([step, _cut(step, 150)], table, FitOptions(free=FREE))
+    model = problem.model
+    std = _sensor_std(step, model)
+    at_rest, moving = problem.experiments
+    assert starts_at_rest(at_rest, std, 10, 1e-3)
+    assert not starts_at_rest(moving, std, 10, 1e-3)
+    assert at_rest.initial_state is not None and moving.initial_state is None
+
+
+def test_a_record_at_rest_starts_where_validate_starts(table, step):
+    """The fitted initial state of a record at rest is the replay's rest state bit for bit,
+    so the fit's cost is the simulation criterion of its written parameters."""
+    result = fit_recordings([step], table, FitOptions(free=FREE))
+    assert result.success, result.message
+    model = build_model("hframe-8")
+    p = model.parameter_vector(result.parameters.values)
+    expected = rest_state(model, p, channels(model, step))
+    # Equal to the rounding of the rigid modes (an SVD of the stiffness matrix at the start's
+    # parameters in the fit, at the fitted ones here): 1e-21 rad on 1e-7 rad positions.
+    np.testing.assert_allclose(result.initial_states[0], expected, rtol=1e-12, atol=1e-18)
+    criterion = simulation_criterion(
+        result.parameters, [step], dict(result.diagnostics["channel_std"])
+    )
+    # The same RK4 (substeps from the same parameters): equal to solver round-off.
+    assert criterion == pytest.approx(result.cost, rel=1e-6)
+    assert "initial states at rest: " in result.summary()
+
+
+def test_estimated_on_request_and_for_records_in_motion(table, step):
+    moving = _cut(step, 150)
+    result = fit_recordings([moving], table, FitOptions(free=FREE))
+    assert result.success, result.message
+    assert result.initial_states[0][4:].any()  # a velocity was estimated
+    assert "initial states estimated: " in result.summary()
+    estimated = build_problem([step], table, FitOptions(free=FREE, initial_state="estimate"))
+    assert estimated.experiments[0].initial_state is None
+    forced = build_problem([moving], table, FitOptions(free=FREE, initial_state="rest"))
+    assert forced.experiments[0].initial_state is not None

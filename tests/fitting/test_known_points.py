@@ -1,0 +1,117 @@
+"""Never worse than a point the fit knows (issue 25, item 2), and the box it searches."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting import fit as fit_module
+from hframe_id.fitting.known_points import reference_sets, simulation_criterion
+from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings.simulated import simulate_recording
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
+
+
+@pytest.fixture(scope="module")
+def table():
+    return load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+
+
+@pytest.fixture(scope="module")
+def truth(table):
+    return table.replace_values(k_l=12500.0, M_cart=1.15, F_c_cart=0.3)
+
+
+@pytest.fixture(scope="module")
+def steps(truth):
+    u = np.zeros((400, 2))
+    u[50:350] = (-4.0, 4.0)
+    return [simulate_recording(truth, u, seed=3), simulate_recording(truth, -u, seed=4)]
+
+
+def test_the_models_reference_files_are_known_points():
+    labels = [label for label, _ in reference_sets("hframe-8")]
+    assert labels == ["hframe-8-table4.1.yaml", "hframe-8-table4.2.yaml"]
+
+
+def test_the_fit_is_compared_with_what_it_knows(table, truth, steps):
+    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
+    assert result.success, result.message
+    points = result.diagnostics["known_points"]
+    assert {"fit", "the start", "the equation-error estimate", "hframe-8-table4.1.yaml"} <= set(
+        points
+    )
+    assert any(label.startswith("known point 1") for label in points)
+    # Matched data: the fit is the best of them, its truth included.
+    assert points["fit"] == min(points.values())
+    assert "the best known point" in result.summary()
+
+
+def _stopping_early(monkeypatch, table, outcome):
+    """``_fit_widening`` returning the start's parameters as a 'successful' fit (a solver
+    that stopped at once) for the first call, then ``outcome(start)``."""
+    real = fit_module._fit_widening
+    calls = []
+
+    def fake(recordings, initial, options):
+        calls.append(initial)
+        result = real(recordings, initial, options)
+        if len(calls) == 1:
+            result.parameters = table.replace_values(**{n: table.values[n] for n in FREE})
+        else:
+            result = outcome(result)
+        return result
+
+    monkeypatch.setattr(fit_module, "_fit_widening", fake)
+    return calls
+
+
+def test_a_fit_worse_than_a_known_point_continues_from_it(monkeypatch, table, truth, steps):
+    calls = _stopping_early(monkeypatch, table, lambda result: result)
+    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
+    assert len(calls) == 2
+    assert result.success, result.message
+    assert "continued from" in result.message
+    points = result.diagnostics["known_points"]
+    continued = next(v for k, v in points.items() if k.startswith("fit continued"))
+    assert continued <= min(v for k, v in points.items() if k not in ("fit",))
+
+
+def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps):
+    def still_at_the_start(result):
+        result.parameters = table
+        return result
+
+    _stopping_early(monkeypatch, table, still_at_the_start)
+    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
+    assert not result.success
+    assert "the fit ends worse than" in result.message
+    std = dict(result.diagnostics["channel_std"])
+    assert simulation_criterion(table, steps, std) > simulation_criterion(truth, steps, std)
+
+
+def test_a_default_box_that_stops_the_fit_is_widened(table, steps, truth):
+    """k_l 1.27 x the start: inside x/÷1.1 squared twice (1.21, 1.46), not inside 1.1."""
+    options = FitOptions(free=("k_l",), bound_factor=1.1)
+    result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
+    assert result.success, result.message
+    assert result.parameters.values["k_l"] == pytest.approx(truth.values["k_l"], rel=1e-3)
+    assert not result.estimates["k_l"].at_bound
+
+
+def test_a_fit_still_on_the_widened_box_fails_saying_so(table, steps):
+    options = FitOptions(free=("k_l",), bound_factor=1.01)
+    result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
+    assert not result.success
+    assert "the default box decided the answer: k_l" in result.message
+
+
+def test_a_given_bound_is_the_users_decision(table, steps):
+    options = FitOptions(free=("k_l",), bounds={"k_l": (12600.0, 13200.0)})
+    result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
+    assert result.success, result.message
+    assert result.estimates["k_l"].at_bound
+    assert result.diagnostics["at_default_box"] == ()
