@@ -210,6 +210,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "rest; or every one estimated",
     )
     parser.add_argument(
+        "--zero-reachable",
+        default="",
+        metavar="NAMES",
+        help="comma-separated friction parameters fitted linearly from 0, which they may "
+        "reach (the others are fitted in log scale, and a fit that ends with one on its lower "
+        "bound is repeated with it reaching 0)",
+    )
+    parser.add_argument(
         "--known",
         action="append",
         default=[],
@@ -358,6 +366,7 @@ def _options(args: argparse.Namespace) -> FitOptions:
         ),
         first_stage=not args.no_first_stage,
         initial_state=args.initial_state,
+        zero_reachable=_names(args.zero_reachable) if args.zero_reachable else (),
         max_iterations=args.max_iterations,
         step_tol=args.step_tol,
         defect_tol=args.defect_tol,

@@ -245,10 +245,10 @@ class FitResult:
         estimated (``FitOptions.initial_state``)."""
         if self.problem is None:
             return None
-        rest = [e.name for e in self.problem.experiments if e.initial_state is not None]
-        estimated = [e.name for e in self.problem.experiments if e.initial_state is None]
-        parts = [f"at rest: {', '.join(rest)}"] if rest else []
-        parts += [f"estimated: {', '.join(estimated)}"] if estimated else []
+        rest = [e.name for e in self.problem.experiments if e.at_rest]
+        estimated = [e.name for e in self.problem.experiments if not e.at_rest]
+        parts = [f"at rest: {', '.join(rest)}"] * bool(rest)
+        parts += [f"estimated: {', '.join(estimated)}"] * bool(estimated)
         return "initial states " + "; ".join(parts)
 
     @property
@@ -401,33 +401,55 @@ def fit_recordings(
     options = options or FitOptions()
     start = time.perf_counter()
     result = _fit_widening(recordings, initial, options)
-    if result.success:
+    # The known points are judged by simulation from the recordings' start: the criterion of
+    # an output-error fit. A prediction-error fit (continuity "none", for plants whose
+    # simulation drifts) has no such criterion to compare by.
+    if result.success and options.continuity == "exact":
         result = _never_worse_than_known(recordings, initial, options, result)
     result.wall_time_s = time.perf_counter() - start
     return result
 
 
 def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
-    """The fit within the default box, repeated with the box widened while it ends on it
-    (``BOX_WIDENINGS``); still on it after that, a failure saying so."""
+    """The fit within the default box, repeated while it ends on it (``BOX_WIDENINGS``
+    times): a nonnegative parameter on its log-scale lower bound then reaches 0
+    (``FitOptions.zero_reachable``), the other boxes widen (bound factor squared). Still on
+    the box after that, a failure saying so."""
     for _ in range(BOX_WIDENINGS):
         result = _fit_in_box(recordings, initial, options)
-        if not result.diagnostics["at_default_box"]:
-            break
-        options = replace(options, bound_factor=options.bound_factor**2)
-    else:
-        result = _fit_in_box(recordings, initial, options)
         boxed = result.diagnostics["at_default_box"]
-        if boxed and result.success:
-            result = replace(
-                result,
-                success=False,
-                message=f"the default box decided the answer: {', '.join(boxed)} ended on a "
-                f"bound of x/÷{options.bound_factor:g} of the start after {BOX_WIDENINGS} "
-                "widenings (the data push them further: a start closer to the rig, or "
-                "--bounds, decides instead); " + result.message,
-            )
+        if not boxed:
+            return result
+        options = _widened(options, result, boxed)
+    result = _fit_in_box(recordings, initial, options)
+    boxed = result.diagnostics["at_default_box"]
+    if boxed and result.success:
+        result = replace(
+            result,
+            success=False,
+            message=f"the default box decided the answer: {', '.join(boxed)} ended on a "
+            f"bound of x/÷{options.bound_factor:g} of the start after {BOX_WIDENINGS} "
+            "widenings (the data push them further: a start closer to the rig, or "
+            "--bounds, decides instead); " + result.message,
+        )
     return result
+
+
+def _widened(options: FitOptions, result: FitResult, boxed: tuple[str, ...]) -> FitOptions:
+    """``options`` with the default box opened for the ``boxed`` parameters of ``result``:
+    nonnegative ones below their start reach 0, any other widens the bound factor."""
+    kinds = {spec.name: spec.kind for spec in result.problem.model.parameters}
+    to_zero = tuple(
+        n
+        for n in boxed
+        if kinds[n] == "nonnegative" and result.estimates[n].estimate < result.estimates[n].initial
+    )
+    widen = set(boxed) - set(to_zero)
+    return replace(
+        options,
+        zero_reachable=options.zero_reachable + to_zero,
+        bound_factor=options.bound_factor**2 if widen else options.bound_factor,
+    )
 
 
 def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, result):
@@ -470,10 +492,10 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     std = dict(result.diagnostics["channel_std"])
     latency = dict(options.latency_samples)
     free = result.problem.free_names
-    starts = [
-        None if e.initial_state is not None else x0
-        for e, x0 in zip(result.problem.experiments, result.initial_states, strict=True)
-    ]
+    # Every point starts where the fit's trajectory does: its estimated initial state (a
+    # record at rest: velocities zero, positions within a sensor's resolution of the
+    # replay's). That favours the fit, so a point that still beats it is better.
+    starts = list(result.initial_states)
 
     def criterion(params):
         return simulation_criterion(params, recordings, std, latency, starts)

@@ -32,7 +32,7 @@ def jackknife_interval(
 ) -> tuple[float, float]:
     """The ``confidence`` interval of ``value`` (SI, non-zero unless ``signed``) from its
     jackknife std [SI] over ``folds`` (>= 2) folds: symmetric in log(value), or linear for a
-    parameter fitted linearly (``signed``: ``ParameterSpec.linear``); ``fit.spread`` with
+    parameter fitted linearly (``signed``: ``FitProblem.linear``); ``fit.spread`` with
     Student's t for z."""
     t = student_t_quantile(0.5 + confidence / 2, folds - 1)
     theta_std = jackknife_std if signed else jackknife_std / abs(value)
@@ -46,7 +46,8 @@ def add_jackknife_intervals(result: FitResult, table: LeaveOneOutTable) -> None:
     the estimate from all recordings) and there are two or more."""
     if len(table.folds) < 2 or not all(fold.success for fold in table.folds):
         return
-    signed = {spec.name: spec.linear for spec in result.problem.model.parameters}
+    problem = result.problem
+    signed = dict(zip(problem.free_names, problem.linear.tolist(), strict=True))
     confidence = result.options.confidence
     for row in table.spread:
         est = result.estimates.get(row.name)

@@ -11,11 +11,11 @@ the points it knows (issue 25, "never worse than a point it knows"):
 - the sets the user names (``FitOptions.known_points``).
 
 The criterion is what ``hframe-id validate`` reproduces: a free-run simulation of each
-training recording from rest at its first measured positions
-(``validation.replay.simulate_channels``), its residuals weighted by the fit's noise levels
-per channel (the sensors' std, or the levels the fit estimated). A record that starts in
-motion starts every point from the fit's estimated initial state (which favours the fit: a
-point that still beats it is better),
+training recording (``validation.replay.simulate_channels``) from the fit's initial state (a
+record at rest: velocities zero, positions within a sensor's resolution of the replay's
+rest state; this favours the fit: a point that still beats it is better), its residuals
+weighted by the fit's noise levels per channel (the sensors' std, or the levels the fit
+estimated),
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2.
 
@@ -59,7 +59,7 @@ def simulation_criterion(
     from hframe_id.validation.replay import simulate_channels
 
     latency = latency_samples or {}
-    starts = initial_states or [None] * len(recordings)
+    starts = [None] * len(recordings) if initial_states is None else initial_states
     total = 0.0
     for recording, x0 in zip(recordings, starts, strict=True):
         try:

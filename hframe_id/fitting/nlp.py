@@ -400,7 +400,7 @@ def solve_nlp(
         build_time += time.perf_counter() - built
         x0 = np.concatenate([(nodes / ms.defect_scale).ravel(), theta[active]])
         # Known nodes (a record's start at rest) are fixed: equal bounds.
-        known = np.where(ms.fixed_node[:, None], nodes / ms.defect_scale, np.nan).ravel()
+        known = np.where(ms.fixed_node, nodes / ms.defect_scale, np.nan).ravel()
         lower = np.concatenate(
             [np.where(np.isnan(known), -np.inf, known), problem.theta_lower[active]]
         )

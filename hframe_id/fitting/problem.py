@@ -41,8 +41,9 @@ RIG_IDENTITY_KEYS = (
 )
 
 #: A record starts at rest (``starts_at_rest``) unless some channel's velocity at its first
-#: sample, fitted over the first shooting window, differs from zero by more than this many
-#: of its standard errors (a two-sided test at 0.27 % per channel).
+#: sample, fitted over its first samples (``validation.replay.REST_SAMPLES``), differs from
+#: zero by more than this many of its standard errors (a two-sided test at 0.27 % per
+#: channel).
 REST_Z = 3.0
 
 #: A window needs at least this many valid output values per free quantity it brings; a
@@ -59,9 +60,11 @@ class Experiment:
     outputs: np.ndarray  # (N, n_y) measurements, NaN where missing
     valid: np.ndarray  # (N, n_y) bool: usable samples
     recording: Recording
-    #: (n_x,) the state the record starts in where it is known, at rest (``rest_state``);
-    #: None where it is estimated (``FitOptions.initial_state``)
-    initial_state: np.ndarray | None = None
+    #: True where the record starts at rest (``FitOptions.initial_state``): its initial
+    #: velocities are zero, not estimated; its positions are (a sensor's offset within its
+    #: resolution: an encoder's quantization phase is up to one step, 1.7 std, for the
+    #: whole record, which averaging cannot remove)
+    at_rest: bool = False
 
     @property
     def n_samples(self) -> int:
@@ -79,6 +82,9 @@ class FitProblem:
     free: tuple[int, ...]  # indices of free parameters in model order
     theta_lower: np.ndarray  # bounds on theta (``parameters``), free parameters
     theta_upper: np.ndarray
+    #: (n_f,) True for free parameters fitted linearly (real ones; nonnegative ones from a
+    #: start at 0 or named in ``FitOptions.zero_reachable``), False for log scale
+    linear: np.ndarray
     #: (n_f,) True where that bound is the default box (``ProblemOptions.bound_factor``):
     #: neither a physical limit (0 of a nonnegative parameter) nor the user's ``bounds``
     box_lower: np.ndarray
@@ -108,12 +114,6 @@ class FitProblem:
     def prior_names(self) -> tuple[str, ...]:
         """Free parameters estimated with a prior (``FitOptions.consider_method`` "prior")."""
         return tuple(n for n, w in zip(self.free_names, self.prior_weight, strict=True) if w > 0)
-
-    @property
-    def linear(self) -> np.ndarray:
-        """(n_f,) True for free parameters fitted linearly (nonnegative and real kinds),
-        False for log scale (positive)."""
-        return np.array([self.model.parameters[i].linear for i in self.free], dtype=bool)
 
     @property
     def linear_scale(self) -> np.ndarray:
@@ -160,7 +160,8 @@ class FitProblem:
             [
                 self.model.parameters[i].kind == "nonnegative"
                 and self.model.parameters[i].name not in given
-                for i in self.free
+                and straight
+                for i, straight in zip(self.free, self.linear, strict=True)
             ],
             dtype=bool,
         )
@@ -373,43 +374,37 @@ def _prepare(rec: Recording, model: Model, latency: dict[str, int]) -> Experimen
 
 
 def starts_at_rest(
-    experiment: Experiment, channel_std: np.ndarray, samples: int, dt: float
+    outputs: np.ndarray, valid: np.ndarray, channel_std: np.ndarray, samples: int, dt: float
 ) -> bool:
-    """Whether the record shows rest at its start: per channel, y = a + b t + c t^2 fitted
-    to its valid samples among the first ``samples``, and no |b| above ``REST_Z`` of its
-    standard error (white noise of ``channel_std`` [SI]). A step from rest accelerates
-    (c), a record cut in motion starts with a velocity (b). Too few samples to tell: at rest
-    is not assumed."""
-    t = np.arange(min(samples, experiment.n_samples)) * dt
+    """Whether a record shows rest at its start: per channel of ``outputs`` (N, n_y), y = a +
+    b t + c t^2 fitted to its ``valid`` samples among the first ``samples``, and no |b| above
+    ``REST_Z`` of its standard error (white noise of ``channel_std`` [SI]). A record cut in
+    motion starts with a velocity (b); one at rest, or accelerating slowly from it, does
+    not. Too few samples to tell: at rest is not assumed."""
+    t = np.arange(min(samples, outputs.shape[0])) * dt
     design = np.stack([np.ones_like(t), t, t**2], axis=1)
-    for j in range(experiment.outputs.shape[1]):
-        valid = experiment.valid[: t.size, j]
-        if np.count_nonzero(valid) <= design.shape[1]:
+    for j in range(outputs.shape[1]):
+        used = valid[: t.size, j]
+        if np.count_nonzero(used) <= design.shape[1]:
             return False
-        a = design[valid]
-        coef, *_ = np.linalg.lstsq(a, experiment.outputs[: t.size, j][valid], rcond=None)
+        a = design[used]
+        coef, *_ = np.linalg.lstsq(a, outputs[: t.size, j][used], rcond=None)
         std = channel_std[j] * math.sqrt(np.linalg.inv(a.T @ a)[1, 1])
         if abs(coef[1]) > REST_Z * std:
             return False
     return True
 
 
-def _with_initial_state(experiment: Experiment, model: Model, p: np.ndarray, std, options):
-    """``experiment`` with its known initial state (at rest) per ``options.initial_state``:
-    the state ``hframe-id validate`` simulates from (``validation.replay.rest_state``)."""
-    rest = options.initial_state == "rest" or (
-        options.initial_state == "auto"
-        and starts_at_rest(
-            experiment, std, options.shooting_interval, float(experiment.recording.sample_period_s)
-        )
-    )
-    if not rest:
-        return experiment
+def _with_initial_state(experiment: Experiment, model: Model, options) -> Experiment:
+    """``experiment`` marked at rest (``Experiment.at_rest``) per ``options.initial_state``:
+    always ("rest"), never ("estimate"), or where its first samples show rest ("auto",
+    ``validation.replay.shows_rest``, the test ``hframe-id validate`` applies too)."""
+    if options.initial_state != "auto":
+        return replace(experiment, at_rest=options.initial_state == "rest")
     # Imported here: the replay's channels are validation's (which imports this module).
-    from hframe_id.validation.replay import channels, rest_state
+    from hframe_id.validation.replay import channels, shows_rest
 
-    state = rest_state(model, p, channels(model, experiment.recording))
-    return replace(experiment, initial_state=state)
+    return replace(experiment, at_rest=shows_rest(channels(model, experiment.recording)))
 
 
 def build_problem(
@@ -454,7 +449,15 @@ def build_problem(
             raise FitError(f"bounds: unknown parameter {name!r}{_suggest(name, names)}")
         if name not in free_names:
             raise FitError(f"bounds given for {name!r}, which is not free")
-    lower, upper, box_lower, box_upper = [], [], [], []
+    for name in wanted.zero_reachable:
+        if name not in names:
+            raise FitError(f"zero_reachable: unknown parameter {name!r}{_suggest(name, names)}")
+        if model.parameters[names.index(name)].kind != "nonnegative":
+            raise FitError(
+                f"zero_reachable: {name} is not a nonnegative parameter (friction), which "
+                "alone may reach 0"
+            )
+    lower, upper, box_lower, box_upper, linear = [], [], [], [], []
     for name in free_names:
         value = p0[names.index(name)]
         kind = model.parameters[names.index(name)].kind
@@ -466,14 +469,18 @@ def build_problem(
             )
         if kind == "nonnegative" and not value >= 0:
             raise FitError(f"free parameter {name} starts at {float(value)!r}; it must be >= 0")
-        low, high = default_bounds(kind, value, wanted.bound_factor)
+        straight = kind == "real" or (
+            kind == "nonnegative" and (value == 0 or name in wanted.zero_reachable)
+        )
+        linear.append(straight)
+        low, high = default_bounds(kind, value, wanted.bound_factor, straight)
         given = name in wanted.bounds
         if given:
             low, high = wanted.bounds[name]
-        if kind == "positive" and not low > 0:
+        if not straight and not low > 0:
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}]: a parameter fitted in log scale needs "
-                "0 < low"
+                "0 < low (a nonnegative one reaches 0 in zero_reachable / --zero-reachable)"
             )
         if kind == "nonnegative" and not low >= 0:
             raise FitError(
@@ -483,14 +490,14 @@ def build_problem(
             raise FitError(
                 f"bounds for {name} [{low:g}, {high:g}] exclude its initial value {value:g}"
             )
-        if kind == "positive":
+        if not straight:
             lower.append(math.log(low / value))
             upper.append(math.log(high / value))
         else:
             scale = abs(value) if value != 0 else 1.0
             lower.append((low - value) / scale)
             upper.append((high - value) / scale)
-        box_lower.append(not given and kind != "nonnegative")
+        box_lower.append(not given and not (kind == "nonnegative" and straight))
         box_upper.append(not given)
     free = tuple(names.index(n) for n in free_names)
 
@@ -515,8 +522,7 @@ def build_problem(
             for name in outputs
         ]
     )
-    sensor_std = np.array([default_channel_std(recordings[0], name) for name in outputs])
-    experiments = tuple(_with_initial_state(e, model, p0, sensor_std, wanted) for e in experiments)
+    experiments = tuple(_with_initial_state(e, model, wanted) for e in experiments)
     quantization = np.array([encoder_step(recordings[0], name) for name in outputs])
     n_unknown = model.n_states * len(experiments) + len(free)
     n_valid = int(sum(e.valid.sum() for e in experiments))
@@ -541,6 +547,7 @@ def build_problem(
         theta_upper=np.array(upper),
         box_lower=np.array(box_lower, dtype=bool),
         box_upper=np.array(box_upper, dtype=bool),
+        linear=np.array(linear, dtype=bool),
         experiments=experiments,
         channel_std=std,
         quantization=quantization,
@@ -551,15 +558,18 @@ def build_problem(
     )
 
 
-def default_bounds(kind: str, value: float, factor: float) -> tuple[float, float]:
+def default_bounds(
+    kind: str, value: float, factor: float, linear: bool = False
+) -> tuple[float, float]:
     """The default box of a free parameter starting at ``value`` [SI]: [value / f, value f]
-    for a positive one (log scale), [0, value f] for a nonnegative one (zero, physical, is
-    reachable; [0, f] SI from a start at 0), value -/+ f |value| for a real one."""
+    in log scale (positive, and nonnegative unless ``linear``), [0, value f] for a
+    nonnegative one fitted linearly (zero, physical, is reachable; [0, f] SI from a start
+    at 0), value -/+ f |value| for a real one."""
     scale = abs(value) if value != 0 else 1.0
-    if kind == "positive":
-        return value / factor, value * factor
-    if kind == "nonnegative":
+    if kind == "nonnegative" and linear:
         return 0.0, max(value, 0.0) + (factor - 1.0) * scale
+    if kind != "real":
+        return value / factor, value * factor
     return value - factor * scale, value + factor * scale
 
 

@@ -127,15 +127,16 @@ class MultipleShooting:
             self.transcription.continuity == "exact"
         )
         self.window_index_in_experiment = self.window_start // m
-        #: (W,) True for a window whose node is known, not estimated: an experiment's first
-        #: window where the record starts at rest (``Experiment.initial_state``)
-        self.fixed_node = np.array(
+        #: (W, n_x) True for the node entries that are known, not estimated: the velocities
+        #: of an experiment's first node where the record starts at rest (``Experiment.at_rest``)
+        self.fixed_node = np.zeros((len(exp_of), self.nx), dtype=bool)
+        self.fixed_node[:, self.nq :] = np.array(
             [
-                k0 == 0 and problem.experiments[e].initial_state is not None
+                k0 == 0 and problem.experiments[e].at_rest
                 for e, k0 in zip(exp_of, start, strict=True)
             ],
             dtype=bool,
-        )
+        )[:, None]
         self.first_window = np.array(
             [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]
         )
@@ -202,17 +203,15 @@ class MultipleShooting:
         return view
 
     @property
-    def estimated_experiments(self) -> np.ndarray:
-        """Indices of the experiments whose initial state is estimated (not at rest)."""
-        return np.array(
-            [e for e, exp in enumerate(self.problem.experiments) if exp.initial_state is None],
-            dtype=int,
-        )
+    def estimated_initial_states(self) -> np.ndarray:
+        """(experiments, n_x) True for the initial-state entries that are estimated (all but
+        the velocities of a record at rest)."""
+        return ~self.fixed_node[self.first_window]
 
     @property
     def n_nuisance(self) -> int:
         """Estimated initial-state entries (the statistics' nuisance parameters)."""
-        return self.nx * len(self.estimated_experiments)
+        return int(np.count_nonzero(self.estimated_initial_states))
 
     def residual_rms(self, cost: float) -> float:
         """Residual rms over the valid samples, in units of each channel's noise std, of a
@@ -277,8 +276,8 @@ class MultipleShooting:
             nodes[windows, : self.nq] = positions[k0]
             nodes[windows, self.nq :] = rates[k0]
             velocity[windows] = rates[np.minimum(k0[:, None] + np.arange(self.m + 1), n - 1)]
-            if exp.initial_state is not None:
-                nodes[windows[0]] = exp.initial_state
+            if exp.at_rest:
+                nodes[windows[0], self.nq :] = 0.0
         return nodes, velocity
 
     def _rigid_fit(self, design, modes, y, weights) -> np.ndarray:
@@ -570,6 +569,8 @@ class MultipleShooting:
         known = known.copy()
         for e, exp in enumerate(self.problem.experiments):
             idx = np.flatnonzero(self.window_experiment == e)
+            if not idx.size:  # none of its windows in this view (a record that never moves)
+                continue
             if not known[idx[0]]:
                 # The record starts at rest (pre-roll): measured positions, no speed.
                 nodes[idx[0], self.nq :] = 0.0

@@ -250,13 +250,11 @@ class GaussNewton:
         np.add.at(g_s, segment, ge[:, :nx])
         h_pp = he[:, nx:, nx:].sum(axis=0)
         g_p = ge[:, nx:].sum(axis=0)
-        # A segment that starts at a known state (at rest) has no first-node step.
-        fixed = self.ms.fixed_node[np.flatnonzero(np.r_[True, ~links])]
-        h_sp[fixed], g_s[fixed] = 0.0, 0.0
-        # Eliminate the segments' first-node steps (block diagonal) by a Schur complement.
+        # Eliminate the segments' first-node steps (block diagonal) by a Schur complement;
+        # known entries (a record's initial velocities at rest) take no step.
         damping = self.node_damping
         h_ss_d = _damped(h_ss, damping) + np.diag(self.prox)
-        h_ss_d[fixed] = np.eye(nx)
+        _pin(h_ss_d, h_sp, g_s, self.ms.fixed_node[np.flatnonzero(np.r_[True, ~links])])
         k = np.linalg.solve(h_ss_d, np.concatenate([h_sp, g_s[:, :, None]], axis=2))
         k_sp, k_g = k[:, :, :-1], k[:, :, -1]
         h_red = h_pp - np.einsum("sij,sik->jk", h_sp, k_sp)
@@ -322,12 +320,15 @@ class GaussNewton:
                 gmat[:, nx:] += b_all[i]
         jc = np.einsum("wkji,wil->wkjl", ev.jac_node, gains)
         jc[..., nx:] += jp_all
-        estimated = ms.estimated_experiments
+        estimated = ms.estimated_initial_states
         n_nuisance = ms.n_nuisance
         full = np.zeros((w, m, ny, n_nuisance + nf))
-        for column, e in enumerate(estimated):
+        column = 0
+        for e, entries in enumerate(estimated):
             idx = ms.window_experiment == e
-            full[idx, :, :, column * nx : (column + 1) * nx] = jc[idx, :, :, :nx]
+            n = int(entries.sum())
+            full[idx, :, :, column : column + n] = jc[idx][..., :nx][..., entries]
+            column += n
         full[..., n_nuisance:] = jc[..., nx:]
         valid = ms.weight > 0
         order = np.arange(w * m * ny).reshape(w, m, ny)
@@ -413,11 +414,11 @@ class GaussNewton:
         h_pp = np.einsum("wri,wrj->ij", jp, jp) + np.einsum("w,wki,wkj->ij", mu, b, b)
         g_p = np.einsum("wri,wr->i", jp, r) + np.einsum("w,wki,wk->i", mu, b, d)
         diag_d = _damped(diag, self.node_damping) + np.diag(self.prox)[None]
-        # Known nodes (a record's start at rest) do not move: no coupling, no step.
+        # Known node entries (a record's initial velocities at rest) take no step.
         fixed = ms.fixed_node
-        diag_d[fixed], cross[fixed], grad[fixed] = np.eye(nx), 0.0, 0.0
-        upper[fixed] = 0.0
-        upper[np.flatnonzero(fixed[1:])] = 0.0
+        _pin(diag_d, cross, grad, fixed)
+        upper[np.broadcast_to(fixed[:, :, None], upper.shape)] = 0.0
+        upper[:-1][np.broadcast_to(fixed[1:, None, :], upper[:-1].shape)] = 0.0
         # Block Thomas: solve H_ss X = [cross, grad] for all right-hand sides at once.
         rhs = np.concatenate([cross, grad[:, :, None]], axis=2)
         c_prime = np.empty((w, nx, nx))
@@ -780,3 +781,16 @@ class GaussNewton:
             substeps=ev.n_substeps,
             radius=radius,
         )
+
+
+def _pin(blocks: np.ndarray, coupling: np.ndarray, gradient: np.ndarray, fixed: np.ndarray) -> None:
+    """Makes the ``fixed`` entries (S, n) of S node steps zero in the systems
+    ``blocks`` (S, n, n) d = -[``coupling`` (S, n, k) dtheta + ``gradient`` (S, n)]: their rows
+    and columns become those of the identity, their right-hand sides zero. In place."""
+    rows = np.broadcast_to(fixed[:, :, None], blocks.shape)
+    cols = np.broadcast_to(fixed[:, None, :], blocks.shape)
+    blocks[rows | cols] = 0.0
+    step, entry = np.nonzero(fixed)
+    blocks[step, entry, entry] = 1.0
+    coupling[fixed] = 0.0
+    gradient[fixed] = 0.0

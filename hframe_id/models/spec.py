@@ -32,10 +32,11 @@ class ParameterSpec:
     ``kind`` says which values are physical: ``"positive"`` (masses, stiffnesses, inertias,
     motor constants), ``"nonnegative"`` (friction, viscous and Coulomb: zero is physical,
     Coulomb friction is zero in the thesis's linear models) or ``"real"`` (either sign:
-    offsets, biases). A fit estimates positive parameters in log scale, nonnegative and real
-    ones linearly (``linear``), so that a nonnegative one can reach zero. ``required=False``
-    marks parameters that only some model options use (belt lengths for position-dependent
-    stiffness, section 4.6).
+    offsets, biases). A fit estimates positive parameters in log scale, real ones linearly,
+    and nonnegative ones in log scale until the data push one to its lower bound, then
+    linearly down to zero (``hframe_id.fitting.problem``, ``FitOptions.zero_reachable``).
+    ``required=False`` marks parameters that only some model options use (belt lengths for
+    position-dependent stiffness, section 4.6).
     """
 
     name: str
@@ -55,12 +56,6 @@ class ParameterSpec:
     def key(self) -> str:
         """The key used in parameter files: name with unit, e.g. ``"k_l [N/m]"``."""
         return f"{self.name} [{self.unit}]"
-
-    @property
-    def linear(self) -> bool:
-        """True if a fit estimates the parameter linearly (nonnegative: down to 0; real),
-        False for log scale (positive)."""
-        return self.kind != "positive"
 
     @property
     def signed(self) -> bool:

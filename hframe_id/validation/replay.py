@@ -6,7 +6,11 @@ model and act inside it. The simulation starts at rest at the first measured pos
 fitter's first node does for a record with a pre-roll, with the belts unstretched: the
 coordinates are the belt-free (rigid) motion that best fits the first sample's valid
 measurements, weighted by the sensors' noise (so the encoders place the motors, and the cart,
-bridge and any unmeasured idler follow); every velocity is zero.
+bridge and any unmeasured idler follow), averaged over the first ``REST_SAMPLES`` where the
+record shows rest there; every velocity is zero. The fitter starts such a record from the
+same velocities (``FitOptions.initial_state``; its positions are estimated, within a
+sensor's resolution of these), so that a fit's residuals are what this replay of its
+parameter file shows.
 """
 
 from __future__ import annotations
@@ -20,11 +24,16 @@ from hframe_id.fitting.problem import (
     default_channel_std,
     output_matrix,
     rigid_modes,
+    starts_at_rest,
 )
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import simulate
+
+#: Samples a record's start is judged and, at rest, averaged over for its rest positions
+#: (``rest_state``): 10 ms at 1 kHz, within the pre-roll of every protocol here (>= 50 ms).
+REST_SAMPLES = 10
 
 
 @dataclass(frozen=True)
@@ -99,10 +108,22 @@ def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarra
     return positions
 
 
+def shows_rest(data: Channels) -> bool:
+    """Whether the record shows rest over its first ``REST_SAMPLES``
+    (``fitting.problem.starts_at_rest`` with the sensors' noise)."""
+    return starts_at_rest(
+        data.measured, data.valid, data.noise_std, REST_SAMPLES, data.sample_period_s
+    )
+
+
 def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
-    """(n_x,) state at rest at the first sample's measured positions (velocities zero)."""
+    """(n_x,) state at rest (velocities zero, belts unstretched) at the measured positions:
+    the mean over the first ``REST_SAMPLES`` where the record shows rest there
+    (``shows_rest``; a laser's noise averaged down by sqrt(10)), else the first sample's."""
+    rest = shows_rest(data)
+    positions = measured_positions(model, p, data)
     x0 = np.zeros(model.n_states)
-    x0[: model.n_states // 2] = measured_positions(model, p, data)[0]
+    x0[: model.n_states // 2] = positions[:REST_SAMPLES].mean(axis=0) if rest else positions[0]
     return x0
 
 

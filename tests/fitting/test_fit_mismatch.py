@@ -217,7 +217,9 @@ def test_a_stalled_moving_window_stage_is_not_taken_for_mismatch():
     assert len(identified) >= 6 and all(identified.values()), covered
 
 
-@pytest.mark.parametrize("stalled_round", [1, 2])
+# Round 1 of these steps runs out of iterations (crawling along k_l / k_r; measured since
+# the records start at rest), round 2 converges: a stall in round 3 falls back on round 2.
+@pytest.mark.parametrize("stalled_round", [1, 3])
 def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, stalled_round):
     """The noise rounds are a majorise-minimise iteration; a last round that stalls is
     rejected as a trust region rejects a step: the fit is the last converged round's optimum,
@@ -251,8 +253,10 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
         return
     assert result.success, result.message
     assert result.stages[-1].name == fit_module.REJECTED_ROUND_STAGE
-    assert "noise round 1's optimum" in result.message
+    assert f"noise round {stalled_round - 1}'s optimum" in result.message
     for name in result.free_names:
-        assert result.parameters.values[name] == pytest.approx(rounds[0][name], rel=1e-12)
+        assert result.parameters.values[name] == pytest.approx(
+            rounds[stalled_round - 2][name], rel=1e-12
+        )
     assert result.diagnostics["max_defect"] <= options.defect_tol
     assert noise["settling"]["settled"] is False and noise["settling"]["change"] > 0

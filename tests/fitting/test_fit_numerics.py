@@ -93,7 +93,7 @@ def test_condensed_jacobian_is_the_single_shooting_jacobian(setup):
         outs.append(x @ ms.c.T / problem.channel_std)
     fd = (outs[0] - outs[1]) / (2 * h)
     valid = problem.experiments[0].valid
-    column = jac[:, ms.nx + j]
+    column = jac[:, ms.n_nuisance + j]  # after the estimated initial states (none at rest)
     # Rows are (window, sample, channel) of the valid samples, i.e. time-major order.
     assert column == pytest.approx(fd[valid], rel=1e-4, abs=1e-3 * np.max(np.abs(fd)))
     assert sum(b.rows.size for b in blocks) == residual.size

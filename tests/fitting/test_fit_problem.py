@@ -103,21 +103,25 @@ def test_bounds_excluding_the_initial_value_fail_before_solving(hframe, recordin
         build_problem([recording], hframe, FitOptions(free=("k_r",), bounds={"k_l": (1, 2e5)}))
 
 
-def test_friction_is_linear_with_zero_reachable(hframe, recording):
-    """Friction (nonnegative) is fitted linearly from 0, also from a start at 0 (Table 4.1's
-    Coulomb terms): its default box starts at 0, which is physics, not the box; positive
-    parameters keep the log-scale box x/÷ bound_factor."""
+def test_friction_reaches_zero_where_asked_or_started_there(hframe, recording):
+    """Friction (nonnegative) is fitted in log scale, and linearly from 0 where named in
+    zero_reachable or started at 0 (Table 4.1's Coulomb terms): its default box then starts
+    at 0, which is physics, not the box."""
     zero = hframe.replace_values(F_c_cart=0.0)
-    problem = build_problem([recording], zero, FitOptions(free=("F_c_cart", "b_cart", "k_l")))
-    assert problem.linear.tolist() == [True, True, False]
+    options = FitOptions(free=("F_c_cart", "b_cart", "B_M1", "k_l"), zero_reachable=("b_cart",))
+    problem = build_problem([recording], zero, options)
+    assert problem.linear.tolist() == [True, True, False, False]
     p = problem.parameters(problem.theta_lower)
     names = problem.model.parameter_names
     assert p[names.index("F_c_cart")] == 0.0 and p[names.index("b_cart")] == 0.0
+    assert p[names.index("B_M1")] == pytest.approx(hframe.values["B_M1"] / 10)
     assert p[names.index("k_l")] == pytest.approx(hframe.values["k_l"] / 10)
-    assert problem.zero_floor.tolist() == [True, True, False]
-    assert problem.box_lower.tolist() == [False, False, True]
+    assert problem.zero_floor.tolist() == [True, True, False, False]
+    assert problem.box_lower.tolist() == [False, False, True, True]
     assert problem.on_box(problem.theta_upper).all()
     assert not problem.on_box(problem.theta_lower)[:2].any()
+    with pytest.raises(FitError, match="zero_reachable: k_l is not a nonnegative"):
+        build_problem([recording], hframe, FitOptions(zero_reachable=("k_l",)))
 
 
 def test_mixed_variants_and_rigs_are_refused(hframe, recording):

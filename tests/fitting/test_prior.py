@@ -85,7 +85,8 @@ def test_the_prior_enters_the_cost_the_step_model_and_the_jacobian(hframe):
     jac, residual, blocks = gn.condensed_jacobian(ev, nodes, free)
     jac0, _, _ = gn_plain.condensed_jacobian(ev_plain, nodes, free)
     assert jac.shape[0] == jac0.shape[0] + 1
-    assert np.flatnonzero(jac[-1]).tolist() == [ms.nx + j] and jac[-1, ms.nx + j] == 5.0
+    column = ms.n_nuisance + j  # after the estimated initial states (none at rest)
+    assert np.flatnonzero(jac[-1]).tolist() == [column] and jac[-1, column] == 5.0
     assert residual[-1] == pytest.approx(0.5)
     assert blocks[-1].label == "prior:k_b" and blocks[-1].quantization_step == 0.0
 

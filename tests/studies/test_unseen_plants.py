@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from hframe_id.models import build_model
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.realistic import NOT_DRAWN, record_realistic, shipped_plant
-from hframe_id.studies.mismatch import STEP_PROTOCOLS
+from hframe_id.studies.mismatch import HELD_OUT, STEP_PROTOCOLS
 from hframe_id.studies.mismatch_effects import record_smooth
 from studies import unseen_plants as study
 from studies.unseen_plants import (
@@ -229,6 +229,14 @@ def test_residuals_of_the_truth_are_the_sensor_noise():
     assert motor_angle_rms(residuals) < 1e-3
 
 
+def test_travel_of_a_plant_that_runs_away():
+    # The shipped plant's steps move the cart a few cm; seed 0 (friction x0.01) runs into the
+    # belt end (0.35 m), where its position-dependent stiffness blows up.
+    step = [HELD_OUT["5V x step"]]
+    assert 0.01 < study.plant_travel_m(shipped_plant("hframe-20"), step) < study.TRAVEL_M
+    assert study.plant_travel_m(build_plant(draw_plant(0)), step) > study.TRAVEL_M
+
+
 def _trial(label="seed 1", **fields) -> UnseenTrial:
     return UnseenTrial(draw=PlantDraw(label), split="dev", **fields)
 
@@ -250,6 +258,7 @@ def test_a_trial_that_raises_is_a_row(monkeypatch):
     def broken_fit(*args, **kwargs):
         raise RuntimeError("solver exploded")
 
+    monkeypatch.setattr(study, "plant_travel_m", lambda *args: 0.1)
     monkeypatch.setattr(study, "training_recordings", lambda *args: [])
     monkeypatch.setattr(study, "fit_recordings", broken_fit)
     trial = study.run_trial(NAMED["heavy"], "named")
@@ -261,8 +270,12 @@ def test_a_trial_that_raises_is_a_row(monkeypatch):
 
 
 def test_summary_counts_and_json_rows():
-    ok = _trial(success=True, wall_time_s=10.0, cost=(1.0, 1.0), held_out_rms_rad=(1.0, 1.0))
-    off = _trial(success=False, wall_time_s=30.0, cost=(2.0, 1.0), held_out_rms_rad=(1.0, 1.0))
+    ok = _trial(
+        success=True, wall_time_s=10.0, cost=(1.0, 1.0), held_out_rms_rad=(1.0, 1.0), travel_m=0.1
+    )
+    off = _trial(
+        success=False, wall_time_s=30.0, cost=(2.0, 1.0), held_out_rms_rad=(1.0, 1.0), travel_m=0.4
+    )
     crashed = _trial(wall_time_s=5.0, error=TrialError("fit", "E", "m", "a:1", "b:2"))
     exited = _trial(error=TrialError("process", "BrokenProcessPool", "m", "?", "?"))
     lines = summary_lines([ok, off, crashed, exited])
@@ -270,7 +283,13 @@ def test_summary_counts_and_json_rows():
         "plants 4: training criterion pass 1/4, held-out pass 2/4, both 1/4; success 1/4; "
         "tracebacks 1, exits 1"
     )
-    assert lines[1] == "fit wall time: median 10.0 s, max 30.0 s (3 fits)"
+    assert lines[1] == (
+        "within the +/-0.25 m travel 1/4: training criterion pass 1, held-out pass 1, both 1"
+    )
+    assert lines[2] == "fit wall time: median 10.0 s, max 30.0 s (3 fits)"
+    assert "travel 0.4 m (LEAVES TRAVEL)" in study.trial_line(off)
+    assert "travel 0.1 m training" in study.trial_line(ok)
+    assert "travel" not in study.trial_line(crashed)
     doc = json.loads(json.dumps(trial_document(crashed), allow_nan=False))
     assert doc["cost"] == [None, None] and doc["error"]["where_own"] == "b:2"
     assert doc["draw"]["current_limit_a"] == 8.0 and doc["plant"] == crashed.draw.describe()

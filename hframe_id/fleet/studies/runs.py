@@ -122,7 +122,8 @@ def study_setup(
         if name in bounds:
             continue
         kind = built.parameters[built.parameter_names.index(name)].kind
-        bounds[name] = default_bounds(kind, initial.values[name], f)
+        value = initial.values[name]
+        bounds[name] = default_bounds(kind, value, f, linear=value == 0)
     options = dataclasses.replace(options, bounds=bounds)
     return StudySetup(tuple(resolved), initial, options, names, bounds)
 
