@@ -162,6 +162,10 @@ def compute_statistics(
     method : ``"robust"``, ``"noise-model"``, ``"hac"`` or ``"gauss-newton"``.
     """
     n, nz = jac.shape
+    # A sensitivity that overflowed (a plant that never moves, a parameter run far off)
+    # carries no usable information: zero, so the statistics say so instead of raising.
+    jac = np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
+    residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
     info = jac.T @ jac
     scale = np.sqrt(np.maximum(np.diag(info), 1e-300))
     inv_s = np.linalg.pinv(info / np.outer(scale, scale), rcond=1e-13, hermitian=True)
@@ -222,8 +226,17 @@ def compute_statistics(
         red = info[k, k]
     d = np.sqrt(np.maximum(np.diag(red), 1e-300))
     c = red / np.outer(d, d)
+    if not np.all(np.isfinite(c)):
+        # Data that carry no usable information (a plant that never moves, sensitivities that
+        # overflowed): nothing is identified, and that is a result, not an error.
+        c = np.zeros_like(c)
     eig = np.linalg.eigvalsh(c) if c.size else np.ones(1)
     collinearity = np.sqrt(np.maximum(np.diag(np.linalg.pinv(c, hermitian=True)), 0.0))
+    collinearity[np.diag(c) == 0] = np.inf
+    # No information at all about a parameter: its pseudo-inverse entry is 0, not its error.
+    blind = np.diag(info)[k] <= 0
+    for spread in (std, std_gn, std_hac, std_noise):
+        spread[blind] = np.inf
     return Statistics(
         names=names,
         covariance=cov,

@@ -43,7 +43,10 @@ def fits():
         volts[50:300] = step
         recordings.append(simulate_recording(truth, volts, seed=seed))
     start = truth.replace_values(**{n: 1.2 * truth.values[n] for n in FREE})
-    return _both_solvers(recordings, start, FitOptions(free=FREE))
+    # Initial states estimated: with a record's initial velocities held at zero (the default
+    # for records at rest), IPOPT from the measured nodes stopped at a worse point (cost 3501
+    # against Gauss-Newton's 1822, an initial y 92 um off; measured 2026-11-25, issue 25).
+    return _both_solvers(recordings, start, FitOptions(free=FREE, initial_state="estimate"))
 
 
 def _both_solvers(recordings, start, options):
@@ -88,7 +91,12 @@ def test_ipopt_and_gauss_newton_reach_the_same_map_estimate(fits):
     ms, start, plain, _ = fits
     recordings = [e.recording for e in ms.problem.experiments]
     start = start.replace_values(M_bridge=start.values["M_bridge"] / 1.2 * 1.002)
-    options = FitOptions(free=FREE, consider_method="prior", consider={"M_bridge": 3e-5})
+    options = FitOptions(
+        free=FREE,
+        consider_method="prior",
+        consider={"M_bridge": 3e-5},
+        initial_state="estimate",  # as in ``fits``
+    )
     map_ms, _, gauss_newton, outcome = _both_solvers(recordings, start, options)
     assert gauss_newton.success and outcome.converged, (gauss_newton.message, outcome.message)
     assert map_ms.problem.prior_names == ("M_bridge",)

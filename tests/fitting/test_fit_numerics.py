@@ -205,3 +205,21 @@ def test_zero_padded_convolution_is_scipy_bit_for_bit(weights):
     np.testing.assert_array_equal(
         convolve_zero_padded(y, np.array(weights)), convolve1d(y, weights, mode="constant")
     )
+
+
+def test_statistics_of_data_without_information_do_not_raise():
+    """A plant that never moves (friction above the motors' stall torque) gave overflowing,
+    then NaN sensitivities and a LinAlgError: now every parameter is simply undetermined."""
+    from hframe_id.fitting.statistics import Block, compute_statistics
+
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(200, 3))
+    jac[:, 1] = 0.0  # a parameter the data do not see
+    jac[5, 2] = np.inf
+    jac[7, 2] = np.nan
+    residual = rng.normal(size=200)
+    block = Block("e:phi1", np.arange(200), 1.0, 0.0, np.zeros(200))
+    stats = compute_statistics(jac, residual, [block], 0, ("a", "b", "c"), "robust")
+    assert np.isfinite(stats.relative_std[0])
+    assert not stats.relative_std[1] < 1e6  # undetermined: huge or infinite
+    assert np.isinf(stats.collinearity[1])
