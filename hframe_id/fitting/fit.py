@@ -412,16 +412,19 @@ def fit_recordings(
 
 def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
     """The fit within the default box, repeated while it ends on it (``BOX_WIDENINGS``
-    times): a nonnegative parameter on its log-scale lower bound then reaches 0
-    (``FitOptions.zero_reachable``), the other boxes widen (bound factor squared). Still on
-    the box after that, a failure saying so."""
+    times) from where it ended: a nonnegative parameter on its log-scale lower bound then
+    reaches 0 (``FitOptions.zero_reachable``), the other boxes widen (bound factor squared,
+    about the new start). Still on the box after that, a failure saying so. The result
+    reports ``initial`` as its start."""
+    start = initial
     for _ in range(BOX_WIDENINGS):
-        result = _fit_in_box(recordings, initial, options)
+        result = _fit_in_box(recordings, start, options)
         boxed = result.diagnostics["at_default_box"]
         if not boxed:
-            return result
+            return _started_from(result, initial)
         options = _widened(options, result, boxed)
-    result = _fit_in_box(recordings, initial, options)
+        start = start.replace_values(**{n: result.parameters.values[n] for n in result.free_names})
+    result = _fit_in_box(recordings, start, options)
     boxed = result.diagnostics["at_default_box"]
     if boxed and result.success:
         result = replace(
@@ -432,7 +435,19 @@ def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> Fit
             "widenings (the data push them further: a start closer to the rig, or "
             "--bounds, decides instead); " + result.message,
         )
-    return result
+    return _started_from(result, initial)
+
+
+def _started_from(result: FitResult, initial: ParameterSet) -> FitResult:
+    """``result`` reporting ``initial`` as its start (a widened fit restarts where the last
+    one ended)."""
+    if result.initial is initial:
+        return result
+    estimates = {
+        name: replace(est, initial=float(initial.values[name]))
+        for name, est in result.estimates.items()
+    }
+    return replace(result, initial=initial, estimates=estimates)
 
 
 def _widened(options: FitOptions, result: FitResult, boxed: tuple[str, ...]) -> FitOptions:
@@ -508,7 +523,7 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     if best.criterion >= own:
         result.diagnostics["known_points"] = report
         return result
-    again = _fit_widening(recordings, best.parameters, options)
+    again = _started_from(_fit_widening(recordings, best.parameters, options), initial)
     continued = criterion(again.parameters) if again.success else math.inf
     report[f"fit continued from {best.label}"] = continued
     if continued <= best.criterion:

@@ -547,6 +547,7 @@ class GaussNewton:
             free = state.active.copy()
             index = np.flatnonzero(free)
             damping_used = None
+            overflowed = False
             while radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
                 key = (self.node_damping, self.prox_scale)
                 if damping_used != key:
@@ -559,6 +560,9 @@ class GaussNewton:
                         ev, free, linearized, exact=penalty is None
                     )
                     damping_used = key
+                overflowed = not (np.all(np.isfinite(h_red)) and np.all(np.isfinite(g_red)))
+                if overflowed:
+                    break
                 # Parameters the data do not determine at all (textbook relative std above
                 # SLOPPY_STD) are not moved: along such directions Gauss-Newton steps are
                 # arbitrary and can take the model somewhere stiff and ill-conditioned. The
@@ -681,6 +685,12 @@ class GaussNewton:
                     monotone = reverts >= WATCHDOG_REVERTS
                     since_best = 0
                     full_step = False
+            if overflowed:
+                message = (
+                    "stopped: the model's sensitivities overflow at these parameters (so stiff "
+                    "or unstable there that no step can be computed)"
+                )
+                break
             max_defect = float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0))
             if self.progress is not None:
                 self.progress(
