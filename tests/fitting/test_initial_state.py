@@ -5,7 +5,6 @@ and validate simulates from rest at the first measured positions (issue 25, item
 """
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,25 +13,16 @@ from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.known_points import simulation_criterion
 from hframe_id.fitting.problem import build_problem, default_channel_std, starts_at_rest
 from hframe_id.models import build_model
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.validation.replay import channels, rest_state
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+#: A small free set (stiffness, mass, viscous and Coulomb friction) for fast fits.
 FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
 
 
 @pytest.fixture(scope="module")
-def table():
-    return load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-
-
-@pytest.fixture(scope="module")
-def step(table):
+def step(table, x_step):
     """A 4 V x-motion step from rest (50 samples of pre-roll)."""
-    u = np.zeros((400, 2))
-    u[50:350] = (-4.0, 4.0)
-    return simulate_recording(table, u, seed=7)
+    return x_step(table, seed=7)
 
 
 def _cut(recording, first: int):

@@ -1,23 +1,13 @@
 """Never worse than a point the fit knows (issue 25, item 2), and the box it searches."""
 
-from pathlib import Path
-
-import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting import fit as fit_module
 from hframe_id.fitting.known_points import reference_sets, simulation_criterion
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.simulated import simulate_recording
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+#: A small free set (stiffness, mass, viscous and Coulomb friction) for fast fits.
 FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
-
-
-@pytest.fixture(scope="module")
-def table():
-    return load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
 
 
 @pytest.fixture(scope="module")
@@ -26,10 +16,8 @@ def truth(table):
 
 
 @pytest.fixture(scope="module")
-def steps(truth):
-    u = np.zeros((400, 2))
-    u[50:350] = (-4.0, 4.0)
-    return [simulate_recording(truth, u, seed=3), simulate_recording(truth, -u, seed=4)]
+def steps(truth, x_step):
+    return [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]
 
 
 def test_the_models_reference_files_are_known_points():

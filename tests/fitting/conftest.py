@@ -1,0 +1,30 @@
+"""Shared fixtures of the fitting tests."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings.simulated import simulate_recording
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+@pytest.fixture(scope="module")
+def table():
+    """Table 4.2 (hframe-8), the default start."""
+    return load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
+
+
+def _x_step(params, seed: int, volts: float = 4.0):
+    u = np.zeros((400, 2))
+    u[50:350] = (-volts, volts)
+    return simulate_recording(params, u, seed=seed)
+
+
+@pytest.fixture(scope="session")
+def x_step():
+    """``x_step(params, seed, volts=4.0)``: a 0.4 s x-motion step of ``params`` from rest (50
+    samples of pre-roll) recorded by the sim rig's sensors."""
+    return _x_step
