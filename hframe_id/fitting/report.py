@@ -144,7 +144,22 @@ def mismatch_statement(result: FitResult) -> str | None:
         f"(residual rms {span} x the sensor std, per channel below). The channels were "
         "weighted by noise levels estimated from the residuals "
         f"({noise['rounds']} round(s)) instead of the sensor specifications; the residuals "
-        "are model error more than noise." + _settling_text(noise.get("settling"))
+        "are model error more than noise."
+        + _settling_text(noise.get("settling"))
+        + _best_known_text(result.diagnostics.get("known_points"))
+    )
+
+
+def _best_known_text(points: dict | None) -> str:
+    """The evidence that the mismatch is the model's, not a poor optimum's: the written
+    parameters simulate the training records better than every point the fit knows
+    (``fitting.known_points``); empty where they were not compared."""
+    if not points:
+        return ""
+    others = [label for label in points if label != "fit" and not label.startswith("fit ")]
+    return (
+        f" Its parameters simulate the training records better than the {len(others)} other "
+        f"point(s) it knows ({', '.join(others)})."
     )
 
 

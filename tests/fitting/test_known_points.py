@@ -82,8 +82,7 @@ def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps
 
 
 def test_a_default_box_that_stops_the_fit_is_widened(table, steps, truth):
-    """k_l 0.95 x the start: outside x/÷1.02, inside it times 1.02^2 about where that fit
-    ended."""
+    """k_l 0.95 x the start: outside x/÷1.02 and 1.02^2, inside 1.02^4."""
     options = FitOptions(free=("k_l",), bound_factor=1.02)
     result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
     assert result.success, result.message
@@ -92,8 +91,7 @@ def test_a_default_box_that_stops_the_fit_is_widened(table, steps, truth):
 
 
 def test_a_fit_still_on_the_widened_box_fails_saying_so(table, steps):
-    """k_l 0.95 x the start; boxes of x/÷1.001, then 1.001^2 and 1.001^4 about where the
-    last fit ended: 0.993 at most."""
+    """k_l 0.95 x the start; boxes of x/÷1.001, 1.001^2 and 1.001^4."""
     options = FitOptions(free=("k_l",), bound_factor=1.001)
     result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
     assert not result.success
