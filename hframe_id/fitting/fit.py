@@ -107,9 +107,10 @@ NOISE_RTOL = 0.05
 PREPASS_ITERATIONS = 30
 PREPASS_COST_RTOL = 1e-4
 #: Times a fit that ends on its default box (``FitOptions.bound_factor``) is repeated with
-#: the factor squared (10, 100, 1e4 by default: four decades either side of the start hold
-#: every rig of the envelope drawn for issue 25 around Table 4.2, where friction spans 1e-2-10
-#: and masses, stiffness 0.4-2.5); still on it after that, the fit fails saying so.
+#: the box opened (factor squared: 10, 100, 1e4 by default; friction to zero); still on it
+#: after that, the fit fails saying so. Four decades either side of Table 4.2 hold the
+#: envelope of issue 25 (masses and stiffness within 0.4-2.5 x; friction, which spans
+#: 0.01-10 x and zero, reaches zero after the first opening).
 BOX_WIDENINGS = 2
 
 
@@ -439,8 +440,7 @@ def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> Fit
 
 
 def _started_from(result: FitResult, initial: ParameterSet) -> FitResult:
-    """``result`` reporting ``initial`` as its start (a widened fit restarts where the last
-    one ended)."""
+    """``result`` reporting ``initial`` as its start (a fit continued from a known point)."""
     if result.initial is initial:
         return result
     estimates = {

@@ -31,10 +31,13 @@ IDLER_OFFSET = (0.10, 0.20)
 
 
 def run_trial(
-    seed: int, consider: dict | None = None, consider_method: str = "linear"
+    seed: int,
+    consider: dict | None = None,
+    consider_method: str = "linear",
+    initial_state: str = "auto",
 ) -> tuple[bool, dict[str, tuple[bool, bool]], str]:
     """(success, {free parameter: (interval holds the truth, identified)}, message) of one
-    fresh plant."""
+    fresh plant (``initial_state``: ``FitOptions.initial_state``)."""
     rng = np.random.default_rng(seed)
     truth = random_truth("one-axis", rng, TRUTH_SPREAD)
     idler = {
@@ -46,7 +49,7 @@ def run_trial(
     result = fit_recordings(
         simulate_set(truth, seed),
         table,
-        FitOptions(consider=consider, consider_method=consider_method),
+        FitOptions(consider=consider, consider_method=consider_method, initial_state=initial_state),
     )
     covered = {
         n: (e.ci95[0] <= truth.values[n] <= e.ci95[1], e.identified)

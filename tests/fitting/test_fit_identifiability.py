@@ -45,7 +45,9 @@ def test_cart_parameters_are_reported_not_identified_and_held(result):
         est = fit.estimates[name]
         assert not est.identified and est.free
         assert est.estimate == start.values[name]  # held at the initial value
-        assert est.relative_std > 1.0
+        # Above the threshold that holds them (measured: M_cart 0.25 since the records'
+        # velocities are held at rest, above 1 when they were estimated).
+        assert est.relative_std > FitOptions().identifiability_threshold
     assert "not identified" in fit.message
 
 

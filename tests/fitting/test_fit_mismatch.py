@@ -215,7 +215,11 @@ def test_a_stalled_moving_window_stage_is_not_taken_for_mismatch():
     through the restarts, and every identified interval holds the truth."""
     from hframe_id.studies.held import run_trial
 
-    success, covered, message = run_trial(4)
+    # Measured with the initial states estimated, as when this was written. With the records'
+    # velocities held at rest (the default since 2026-11-25) plant 4 ends at another optimum,
+    # of lower cost (843 against 848 chi^2/2), whose J_1, B_1 and tau_c1 intervals miss the
+    # truth (-9 %, +60 %, +31 %): an open point of issue 25, not hidden by this test.
+    success, covered, message = run_trial(4, initial_state="estimate")
     assert success, message
     identified = {name: holds for name, (holds, ident) in covered.items() if ident}
     assert len(identified) >= 6 and all(identified.values()), covered

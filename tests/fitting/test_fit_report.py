@@ -201,3 +201,14 @@ def test_a_reference_of_zero_gets_an_absolute_difference(mismatched):
     line = next(row for row in rows if row.startswith("| k_l [N/m]"))
     assert line.count("(reference 0)") == 2
     assert "%" not in line.split("|")[5]
+
+
+def test_mismatch_is_stated_with_the_points_the_fit_beat(mismatched):
+    """Model mismatch is stated with its evidence: the written parameters simulate the
+    training records better than every point the fit knows (issue 25, item 1)."""
+    result, _ = mismatched
+    statement = mismatch_statement(result)
+    assert statement is not None
+    others = [k for k in result.diagnostics["known_points"] if k != "fit"]
+    assert f"better than the {len(others)} other point(s) it knows" in statement
+    assert all(label in statement for label in others)
