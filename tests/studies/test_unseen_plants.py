@@ -14,9 +14,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from hframe_id.models import build_model
+from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.realistic import NOT_DRAWN, record_realistic, shipped_plant
-from hframe_id.studies.mismatch import HELD_OUT, STEP_PROTOCOLS
+from hframe_id.studies.mismatch import HELD_OUT, STEP_PROTOCOLS, TABLE_4_2
 from hframe_id.studies.mismatch_effects import record_smooth
 from studies import unseen_plants as study
 from studies.unseen_plants import (
@@ -319,3 +320,17 @@ def test_selected_tasks_default_to_a_whole_split():
     assert tasks == [("seed", s) for s in TEST_SEEDS]
     tasks = study.selected_tasks(parser.parse_args(["--named", "worn", "--seeds", "4"]))
     assert tasks == [("named", "worn"), ("seed", 4)]
+
+
+def test_seeded_starts_are_reproducible_and_within_the_spread():
+    from studies.seeded_starts import SPREAD, reached_best, seeded_start
+
+    table = load_parameter_file(TABLE_4_2)
+    free = ("k_l", "M_cart", "F_c_cart")
+    first, again = seeded_start(table, free, 3), seeded_start(table, free, 3)
+    assert first.values == again.values
+    for name in free:
+        factor = first.values[name] / table.values[name]
+        assert SPREAD[0] <= factor <= SPREAD[1]
+    assert first.values["k_r"] == table.values["k_r"]
+    assert reached_best([1.0, 1.005, 1.02, float("nan")]) == 2
