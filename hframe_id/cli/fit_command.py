@@ -204,10 +204,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--initial-state",
         choices=("auto", "rest", "estimate"),
         default="auto",
-        help="each recording's initial state: at rest (velocities zero, belts unstretched, "
-        "at the first measured positions: what validate and simulate start from) where the "
-        "record starts at rest, estimated where it starts in motion (auto); every one at "
-        "rest; or every one estimated",
+        help="each recording's initial state: at rest (every velocity zero, as validate and "
+        "simulate start; positions estimated, within a sensor's resolution of the measured "
+        "ones) where the record's first 10 samples show rest, estimated where it starts in "
+        "motion (auto); every one at rest; or every one estimated",
     )
     parser.add_argument(
         "--zero-reachable",
