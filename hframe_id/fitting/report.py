@@ -393,6 +393,11 @@ def _status_lines(result: FitResult, recordings: list[Recording], parameter_file
         else "- parameter file: none written (the fit failed; do not use these values)",
         f"- uncertainty: {result.options.uncertainty} method, "
         f"{round(100 * result.options.confidence)} % intervals",
+        *(
+            f"- {line}"
+            for line in (result.initial_state_statement, result.known_points_statement)
+            if line
+        ),
         "",
     ]
 

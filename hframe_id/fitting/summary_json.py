@@ -9,7 +9,10 @@ One JSON object, the same shape for every model::
                           "interval_95": [93.5, 96.7], "free": true, "identified": true,
                           "initial": 95.1089}, ...},
      "channels": {"qm": {"unit": "m", "residual_rms": 1.7e-06, "noise_std": 1.7e-06}},
-     "held": "..." or null}
+     "held": "..." or null,
+     "initial_states": {"4V_xmotion.mcap": "rest" or "estimated"},
+     "known_points": {"fit": 1904.5, "the start": 1.1e13, ...} (the simulation criterion,
+                     chi^2 / 2, of the fit and the points it knows; {} if not compared)}
 
 Values are SI, in the parameter's ``unit``. Parameters that were not free have ``std`` and
 ``interval_95`` null; numbers that are not finite (an interval the data do not bound) are null.
@@ -71,4 +74,13 @@ def fit_summary(
         "parameters": parameters,
         "channels": channels,
         "held": result.held_statement(),
+        "initial_states": {
+            e.name: "rest" if e.at_rest else "estimated" for e in result.problem.experiments
+        }
+        if result.problem
+        else {},
+        "known_points": {
+            label: _number(value)
+            for label, value in result.diagnostics.get("known_points", {}).items()
+        },
     }
