@@ -220,3 +220,17 @@ def test_several_recordings_get_a_leave_one_out_table(tmp_path, capsys):
     assert "cross-validation" not in capsys.readouterr().err
     (report,) = (tmp_path / "no-cv").glob("*-report.md")
     assert "Leave-one-recording-out" not in report.read_text()
+
+
+def test_json_says_how_each_record_started_and_what_the_fit_beat(tmp_path, capsys):
+    """The shipped step starts at rest; the fit's simulation criterion is the lowest of the
+    points it knows (the start, the equation-error estimate, Table 4.1)."""
+    import json
+
+    status = main(["fit", str(DATA), "--out-dir", str(tmp_path), "--no-plots", "--json"])
+    assert status == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["initial_states"] == {"4V_xmotion.mcap": "rest"}
+    points = summary["known_points"]
+    assert {"fit", "the start", "hframe-8-table4.1.yaml"} <= set(points)
+    assert points["fit"] == min(points.values())
