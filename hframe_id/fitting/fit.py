@@ -473,43 +473,39 @@ def _widened(options: FitOptions, result: FitResult, boxed: tuple[str, ...]) -> 
 def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, result):
     """(label, parameter set) of the points a fit must not end worse than
     (``known_points``): the start, the equation-error estimate, the model's reference files
-    and the user's ``FitOptions.known_points``; sets equal in their free values once."""
+    and the user's ``FitOptions.known_points``, each with the start's fixed parameters and its
+    free values clipped into the fit's box (the user's bounds hold for every point the fit
+    may continue from); sets equal in their free values once."""
     problem = result.problem
     ms = MultipleShooting(problem)
     ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
-    regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
-    values = problem.parameters(regressed)
-    estimate = initial.replace_values(
-        **{n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
-    )
-    candidates = [
-        ("the start", initial),
-        ("the equation-error estimate", estimate),
-        *reference_sets(initial.variant),
-        *((f"known point {i + 1} ({p.title})", p) for i, p in enumerate(options.known_points)),
+    thetas = [
+        ("the start", np.zeros(len(problem.free))),
+        (
+            "the equation-error estimate",
+            equation_error_start(problem, ms.measured_positions, ms.measured_usable),
+        ),
+        *((label, problem.theta_of(p)) for label, p in reference_sets(initial.variant)),
+        *(
+            (f"known point {i + 1} ({p.title})", problem.theta_of(p))
+            for i, p in enumerate(options.known_points)
+        ),
     ]
-    unique, seen = [], set()
-    for label, given in candidates:
-        # Within the fit's box (the user's bounds hold for every point it may continue from).
-        theta = np.clip(problem.theta_of(given), problem.theta_lower, problem.theta_upper)
-        values = problem.parameters(theta)
-        params = initial.replace_values(
-            **{n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
-        )
-        key = tuple(params.values[n] for n in problem.free_names)
-        if key not in seen:
-            seen.add(key)
-            unique.append((label, params))
-    return unique
+    unique = {}
+    for label, theta in thetas:
+        values = problem.parameters(np.clip(theta, problem.theta_lower, problem.theta_upper))
+        free = {n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
+        unique.setdefault(tuple(free.values()), (label, initial.replace_values(**free)))
+    return list(unique.values())
 
 
 def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
-    written file (a simulation from rest, ``known_points.simulation_criterion``): ended worse
-    than one, it continues from the best of them; worse still, it fails saying so."""
+    written file (a free-run simulation of each record from the fit's initial state,
+    ``known_points.simulation_criterion``): ended worse than one, it continues from the best
+    of them; worse still, it fails saying so."""
     std = dict(result.diagnostics["channel_std"])
     latency = dict(options.latency_samples)
-    free = result.problem.free_names
     # Every point starts where the fit's trajectory does: its estimated initial state (a
     # record at rest: velocities zero, positions within a sensor's resolution of the
     # replay's). That favours the fit, so a point that still beats it is better.
@@ -520,7 +516,7 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
 
     own = criterion(result.parameters)
     candidates = _known_candidates(recordings, initial, options, result)
-    points = known_points(initial, free, candidates, recordings, std, latency, starts)
+    points = known_points(candidates, recordings, std, latency, starts)
     best = points[0]
     report = {"fit": own, **{p.label: p.criterion for p in points}}
     if best.criterion >= own:

@@ -19,7 +19,8 @@ estimated),
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2.
 
-Each known point enters with the fit's fixed parameters and its own values of the free ones.
+Each known point enters with the fit's fixed parameters and its own values of the free ones,
+clipped into the fit's box (``fit._known_candidates``).
 """
 
 from __future__ import annotations
@@ -93,27 +94,21 @@ def reference_sets(variant: str) -> list[tuple[str, ParameterSet]]:
     return sets
 
 
-def with_free_values(start: ParameterSet, other: ParameterSet, free: Sequence[str]) -> ParameterSet:
-    """``start`` with the free parameters' values taken from ``other``."""
-    return start.replace_values(**{name: other.values[name] for name in free})
-
-
 def known_points(
-    start: ParameterSet,
-    free: Sequence[str],
     candidates: Sequence[tuple[str, ParameterSet]],
     recordings: Sequence[Recording],
     channel_std: dict[str, float],
     latency_samples: dict[str, int] | None = None,
     initial_states: Sequence[np.ndarray | None] | None = None,
 ) -> list[KnownPoint]:
-    """Each candidate with ``start``'s fixed parameters and its own free values, and its
-    criterion (``simulation_criterion``), best first."""
-    points = []
-    for label, params in candidates:
-        point = with_free_values(start, params, free)
-        criterion = simulation_criterion(
-            point, recordings, channel_std, latency_samples, initial_states
+    """Each (label, parameter set) candidate with its criterion (``simulation_criterion``),
+    best first."""
+    points = [
+        KnownPoint(
+            label,
+            params,
+            simulation_criterion(params, recordings, channel_std, latency_samples, initial_states),
         )
-        points.append(KnownPoint(label, point, criterion))
+        for label, params in candidates
+    ]
     return sorted(points, key=lambda p: p.criterion)

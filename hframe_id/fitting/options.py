@@ -63,7 +63,6 @@ class ProblemOptions:
     consider: Mapping[str, float] | None
     consider_method: str
     initial_state: str
-    shooting_interval: int
     zero_reachable: tuple[str, ...]
 
 
@@ -168,10 +167,10 @@ class FitOptions:
         control, the EMPS axis): a short horizon limits the drift's bias, a long one the
         noise's influence (docs/real-data.md).
     initial_state : each recording's initial state. ``"auto"`` (default): at rest (every
-        velocity zero, the belts unstretched, at the first sample's measured positions:
-        what ``hframe-id validate`` and ``simulate`` start from, ``replay.rest_state``) where
-        the record's first samples show rest (``problem.starts_at_rest``), estimated where it
-        starts in motion; ``"rest"``: every record at rest; ``"estimate"``: every initial state
+        velocity zero, as ``hframe-id validate`` and ``simulate`` start; the positions
+        estimated, within a sensor's resolution of the measured ones) where the record's
+        first samples show rest (``problem.starts_at_rest``), estimated where it starts in
+        motion; ``"rest"``: every record at rest; ``"estimate"``: every initial state
         estimated. A free initial state can absorb model error that the written file,
         simulated from rest, then shows (issue 25).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default

@@ -41,10 +41,12 @@ RIG_IDENTITY_KEYS = (
 )
 
 #: A record starts at rest (``starts_at_rest``) unless some channel's velocity at its first
-#: sample, fitted over its first samples (``validation.replay.REST_SAMPLES``), differs from
-#: zero by more than this many of its standard errors (a two-sided test at 0.27 % per
-#: channel).
+#: sample, fitted over its first ``REST_SAMPLES``, differs from zero by more than ``REST_Z``
+#: of its standard errors (a two-sided test at 0.27 % per channel). 10 ms at 1 kHz: within
+#: the pre-roll of every protocol here (>= 50 ms); the replay averages a record at rest over
+#: them for its rest positions (``validation.replay.rest_state``).
 REST_Z = 3.0
+REST_SAMPLES = 10
 
 #: A window needs at least this many valid output values per free quantity it brings; a
 #: whole record needs this many valid values per estimated quantity (states + parameters).
@@ -395,16 +397,16 @@ def starts_at_rest(
     return True
 
 
-def _with_initial_state(experiment: Experiment, model: Model, options) -> Experiment:
+def _with_initial_state(experiment: Experiment, sensor_std: np.ndarray, options) -> Experiment:
     """``experiment`` marked at rest (``Experiment.at_rest``) per ``options.initial_state``:
-    always ("rest"), never ("estimate"), or where its first samples show rest ("auto",
-    ``validation.replay.shows_rest``, the test ``hframe-id validate`` applies too)."""
+    always ("rest"), never ("estimate"), or where its first ``REST_SAMPLES`` show rest with
+    the sensors' noise ``sensor_std`` [SI] ("auto"; the test ``hframe-id validate`` applies,
+    ``validation.replay.shows_rest``)."""
     if options.initial_state != "auto":
         return replace(experiment, at_rest=options.initial_state == "rest")
-    # Imported here: the replay's channels are validation's (which imports this module).
-    from hframe_id.validation.replay import channels, shows_rest
-
-    return replace(experiment, at_rest=shows_rest(channels(model, experiment.recording)))
+    dt = float(experiment.recording.sample_period_s)
+    rest = starts_at_rest(experiment.outputs, experiment.valid, sensor_std, REST_SAMPLES, dt)
+    return replace(experiment, at_rest=rest)
 
 
 def build_problem(
@@ -522,7 +524,8 @@ def build_problem(
             for name in outputs
         ]
     )
-    experiments = tuple(_with_initial_state(e, model, wanted) for e in experiments)
+    sensor_std = np.array([default_channel_std(recordings[0], name) for name in outputs])
+    experiments = tuple(_with_initial_state(e, sensor_std, wanted) for e in experiments)
     quantization = np.array([encoder_step(recordings[0], name) for name in outputs])
     n_unknown = model.n_states * len(experiments) + len(free)
     n_valid = int(sum(e.valid.sum() for e in experiments))

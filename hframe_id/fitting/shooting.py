@@ -572,8 +572,10 @@ class MultipleShooting:
             if not idx.size:  # none of its windows in this view (a record that never moves)
                 continue
             if not known[idx[0]]:
-                # The record starts at rest (pre-roll): measured positions, no speed.
-                nodes[idx[0], self.nq :] = 0.0
+                # The first node as given: measured positions, and no speed for a record at
+                # rest (``Experiment.at_rest``), the measured rates for one in motion.
+                if exp.at_rest:
+                    nodes[idx[0], self.nq :] = 0.0
                 known[idx[0]] = True
             i = 0
             while i < idx.size:

@@ -56,8 +56,3 @@ class ParameterSpec:
     def key(self) -> str:
         """The key used in parameter files: name with unit, e.g. ``"k_l [N/m]"``."""
         return f"{self.name} [{self.unit}]"
-
-    @property
-    def signed(self) -> bool:
-        """True if the parameter may take either sign (fitted linearly, not in log scale)."""
-        return self.kind == "real"

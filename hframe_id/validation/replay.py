@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hframe_id.fitting.problem import (
+    REST_SAMPLES,
     applied_inputs,
     default_channel_std,
     output_matrix,
@@ -30,10 +31,6 @@ from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import simulate
-
-#: Samples a record's start is judged and, at rest, averaged over for its rest positions
-#: (``rest_state``): 10 ms at 1 kHz, within the pre-roll of every protocol here (>= 50 ms).
-REST_SAMPLES = 10
 
 
 @dataclass(frozen=True)
