@@ -227,6 +227,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "worse, it continues from the best of them, or fails saying so; repeatable",
     )
     parser.add_argument(
+        "--starts",
+        type=int,
+        default=FitOptions.starts,
+        metavar="N",
+        help="a multistart portfolio: the fit from the start and from N-1 seeded draws "
+        "around it (each free parameter x/÷2 at most), the best kept and how many starts "
+        "reached it reported (default 1: the start only); N fits' time",
+    )
+    parser.add_argument(
+        "--start-seed",
+        type=int,
+        default=FitOptions.start_seed,
+        metavar="S",
+        help="seed of the portfolio's draws (default 0)",
+    )
+    parser.add_argument(
         "--no-first-stage",
         action="store_true",
         help="skip the equation-error start and the stages on the moving windows (start the "
@@ -367,6 +383,8 @@ def _options(args: argparse.Namespace) -> FitOptions:
         first_stage=not args.no_first_stage,
         initial_state=args.initial_state,
         zero_reachable=_names(args.zero_reachable) if args.zero_reachable else (),
+        starts=args.starts,
+        start_seed=args.start_seed,
         max_iterations=args.max_iterations,
         step_tol=args.step_tol,
         defect_tol=args.defect_tol,

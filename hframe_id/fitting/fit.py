@@ -38,7 +38,10 @@ import numpy as np
 from hframe_id.fitting.consider import consider_covariance
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.known_points import known_points, reference_sets, simulation_criterion
+from hframe_id.fitting.multistart import judged, seeded_starts
+from hframe_id.fitting.multistart import statement as multistart_statement
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
+from hframe_id.fitting.open_ended import open_ends
 from hframe_id.fitting.options import (
     HELD_PRIOR_RELATIVE_STD,
     FitOptions,
@@ -128,7 +131,9 @@ class ParameterEstimate:
     data, fixes it) and an interval that ends at the bound. After a leave-one-recording-out
     cross-validation, ``jackknife_std`` and ``jackknife_ci95`` are the experiment-level
     jackknife's (``fitting.jackknife``), which hold model error that differs between
-    experiments; None without one.
+    experiments; None without one. ``open_ended`` is ``"above"`` or ``"below"`` for a
+    parameter on the widened default box that the data bound on the other side only
+    (``fitting.open_ended``): its interval runs to infinity or 0.
     """
 
     name: str
@@ -146,6 +151,7 @@ class ParameterEstimate:
     identified_by: tuple[str, ...] = ()
     jackknife_std: float | None = None
     jackknife_ci95: tuple[float, float] | None = None
+    open_ended: str = ""
 
     @property
     def key(self) -> str:
@@ -281,6 +287,8 @@ class FitResult:
                 continue
             if not self.success:
                 status = "not assessed (fit failed)"
+            elif est.open_ended:
+                status = f"not bounded {est.open_ended} by the data (on the box)"
             elif est.at_bound:
                 status = "at bound (the box fixes it)"
             elif est.identified:
@@ -298,7 +306,16 @@ class FitResult:
                 f"{est.key:<22} {est.initial:>11.5g} {est.estimate:>11.5g} "
                 f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]{extra}  {status}"
             )
-        lines += [s for s in (self.initial_state_statement, self.known_points_statement) if s]
+        starts = self.diagnostics.get("starts")
+        lines += [
+            s
+            for s in (
+                self.initial_state_statement,
+                self.known_points_statement,
+                multistart_statement(starts) if starts else None,
+            )
+            if s
+        ]
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "
             f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} noise std, "
@@ -401,7 +418,10 @@ def fit_recordings(
     """
     options = options or FitOptions()
     start = time.perf_counter()
-    result = _fit_widening(recordings, initial, options)
+    if options.starts > 1:
+        result = _portfolio(recordings, initial, options)
+    else:
+        result = _fit_widening(recordings, initial, options)
     # The known points are judged by simulation from the recordings' start: the criterion of
     # an output-error fit. A prediction-error fit (continuity "none", for plants whose
     # simulation drifts) has no such criterion to compare by.
@@ -409,6 +429,35 @@ def fit_recordings(
         result = _never_worse_than_known(recordings, initial, options, result)
     result.wall_time_s = time.perf_counter() - start
     return result
+
+
+def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
+    """The fit from ``initial`` and from ``options.starts - 1`` seeded draws around it
+    (``multistart``), one after another; the best successful one by its file's criterion
+    (the first's if none succeeded), with every start's outcome in ``diagnostics["starts"]``."""
+    progress = _progress_sink(options)
+    first = _fit_widening(recordings, initial, options)
+    problem = first.problem
+    kinds = {spec.name: spec.kind for spec in problem.model.parameters}
+    draws = seeded_starts(
+        initial,
+        problem.free_names,
+        kinds,
+        options.starts,
+        options.start_seed,
+        options.bounds,
+    )
+    results = [(draws[0][0], first)]
+    for label, start in draws[1:]:
+        if progress is not None:
+            progress(FitProgress(label, 0, math.nan, math.nan, math.nan, "fitting from it"))
+        results.append((label, _started_from(_fit_widening(recordings, start, options), initial)))
+    std = dict(first.diagnostics["channel_std"])
+    outcomes = judged(results, recordings, std, dict(options.latency_samples))
+    k = min(range(len(outcomes)), key=lambda i: outcomes[i].criterion)
+    best = results[k][1]
+    best.diagnostics["starts"] = outcomes
+    return best
 
 
 def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
@@ -427,16 +476,52 @@ def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> Fit
         options = _widened(options, result, boxed)
     result = _fit_in_box(recordings, initial, options)
     boxed = result.diagnostics["at_default_box"]
-    if boxed and result.success:
-        result = replace(
-            result,
-            success=False,
-            message=f"the default box decided the answer: {', '.join(boxed)} ended on a "
-            f"bound of x/÷{options.bound_factor:g} of the start after {BOX_WIDENINGS} "
-            "widenings (the data push them further: a start closer to the rig, or "
-            "--bounds, decides instead); " + result.message,
+    if not (boxed and result.success):
+        return result
+    ends = open_ends(result, recordings, boxed)
+    if all(end.open for end in ends):
+        return _with_open_ends(result, ends)
+    return replace(
+        result,
+        success=False,
+        message=f"the default box decided the answer: {', '.join(boxed)} ended on a "
+        f"bound of x/÷{options.bound_factor:g} of the start after {BOX_WIDENINGS} "
+        "widenings (the data push them further: a start closer to the rig, or "
+        "--bounds, decides instead; "
+        + "; ".join(end.statement() for end in ends)
+        + "); "
+        + result.message,
+    )
+
+
+def _with_open_ends(result: FitResult, ends) -> FitResult:
+    """``result`` with each of ``ends`` (``open_ended.OpenEnd``, all open) reported
+    open-ended. Their interval is the whole physical range, 0 (minus infinity for a real
+    parameter) to infinity: the data bound them on one side only, and the scan's finite end
+    is the held slice's (the others at their fitted values), narrower than the profile's, so
+    it is stated in the message, not given as a confidence bound."""
+    kinds = {spec.name: spec.kind for spec in result.problem.model.parameters}
+    estimates = dict(result.estimates)
+    for end in ends:
+        floor = -math.inf if kinds[end.name] == "real" else 0.0
+        estimates[end.name] = replace(
+            estimates[end.name], ci95=(floor, math.inf), open_ended=end.direction
         )
-    return result
+    at_bound = [n for n, est in estimates.items() if est.at_bound]
+    still = [n for n in at_bound if not estimates[n].open_ended]
+    message = result.message.replace(_at_bound_clause(at_bound), _at_bound_clause(still))
+    message += "; open-ended: " + "; ".join(end.statement() for end in ends)
+    return replace(result, estimates=estimates, message=message)
+
+
+def _at_bound_clause(names: list[str]) -> str:
+    """The clause of a fit's message naming the parameters a bound stopped ("" if none)."""
+    if not names:
+        return ""
+    return (
+        f"; at a bound (the box, not the data, ends them there; their intervals stop at it; "
+        f"--bounds widens it): {', '.join(names)}"
+    )
 
 
 def _started_from(result: FitResult, initial: ParameterSet) -> FitResult:
@@ -1339,11 +1424,7 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         )
     else:
         message = final.message
-        if at_bound:
-            message += (
-                f"; at a bound (the box, not the data, ends them there; their intervals stop "
-                f"at it; --bounds widens it): {', '.join(at_bound)}"
-            )
+        message += _at_bound_clause(at_bound)
         if not_identified:
             message += f"; not identified (held at initial value): {', '.join(not_identified)}"
         poorly = [n for n in stats.names if not estimates[n].identified and n not in at_bound]

@@ -220,6 +220,10 @@ class FitOptions:
     known_points : parameter sets of the fitted model (``hframe-id fit --known FILE``) the fit
         must not end worse than, besides its start, the equation-error estimate and the
         model's reference files (``hframe_id.fitting.known_points``).
+    starts, start_seed : a multistart portfolio (``hframe_id.fitting.multistart``): the fit
+        from ``initial`` and from ``starts - 1`` seeded draws around it (x/÷2 at most, one
+        generator seeded with ``start_seed``), the best kept and how many reached it
+        reported. 1 (default): the given start only.
     """
 
     free: tuple[str, ...] | None = None
@@ -253,6 +257,8 @@ class FitOptions:
     progress: Callable[[FitProgress], None] | None = None
     known_points: tuple[Any, ...] = ()  # ParameterSet objects
     zero_reachable: tuple[str, ...] = ()
+    starts: int = 1
+    start_seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("free", "fix"):
@@ -371,6 +377,13 @@ class FitOptions:
         if not (isinstance(self.confidence, float) and 0 < self.confidence < 1):
             raise OptionError(f"confidence must be in (0, 1), got {self.confidence!r}")
         _positive("threads", self.threads, integer=True)
+        _positive("starts", self.starts, integer=True)
+        if (
+            isinstance(self.start_seed, bool)
+            or not isinstance(self.start_seed, int)
+            or (self.start_seed < 0)
+        ):
+            raise OptionError(f"start_seed must be an integer >= 0, got {self.start_seed!r}")
         if self.verbose not in (0, 1, 2):
             raise OptionError(f"verbose must be 0, 1 or 2, got {self.verbose!r}")
         if self.progress is not None and not callable(self.progress):
@@ -435,6 +448,8 @@ class FitOptions:
             "max_misfit": float(self.max_misfit),
             "known_points": [p.title for p in self.known_points],
             "zero_reachable": list(self.zero_reachable),
+            "starts": int(self.starts),
+            "start_seed": int(self.start_seed),
             "uncertainty": self.uncertainty,
             "confidence": float(self.confidence),
             "substep_safety": float(self.substep_safety),

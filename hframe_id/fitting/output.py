@@ -9,7 +9,8 @@ controller and the exporters read it like the thesis's; its header adds
   levels: how the fit weighed each channel and its residual rms, with the model-mismatch
   statement when the model does not follow the data at the sensors' noise level;
 - ``uncertainty``: per free parameter the estimate, standard error, 95 % interval, whether the
-  data identify it (and which experiments would), whether the box stopped it (``at_bound``),
+  data identify it (and which experiments would), whether the box stopped it (``at_bound``)
+  and whether the data bound it on one side only (``open_ended``),
   after a cross-validation the experiment-level jackknife's std and 95 % interval, plus the
   correlation matrix.
 
@@ -191,6 +192,7 @@ def uncertainty(result: FitResult) -> dict[str, Any]:
             f"interval_{level.replace(' %', '')}": [_number(est.ci95[0]), _number(est.ci95[1])],
             "identified": bool(est.identified),
             "at_bound": bool(est.at_bound),
+            "open_ended": est.open_ended or None,
             **(
                 {
                     "jackknife_std": _number(est.jackknife_std),

@@ -245,6 +245,8 @@ def parameter_table(
         diff = _relative_difference(est.estimate, ref, 2) if ref is not None else "n/a"
         if not result.success:
             status = "not assessed (fit failed)"
+        elif est.open_ended:
+            status = f"not bounded {est.open_ended} by the data (interval open there)"
         elif est.at_bound:
             status = "**at bound** (the box fixes it; interval ends there)"
         elif est.identified:
@@ -410,7 +412,13 @@ def _not_identified_lines(result: FitResult) -> list[str]:
         return []
     lines = ["## Not identified, at a bound or poorly determined", ""]
     for est in weak:
-        if est.at_bound:
+        if est.open_ended:
+            fate = (
+                f"on the box at {_fmt(est.estimate)}, and the data do not bound it "
+                f"{est.open_ended}: moved back towards the start, the fit is no worse "
+                "(see the verdict); any value beyond its interval's finite end fits as well."
+            )
+        elif est.at_bound:
             fate = (
                 f"stopped at a bound of the box, {_fmt(est.estimate)}: the data push it "
                 "further, the box fixes it (--bounds widens the box)."

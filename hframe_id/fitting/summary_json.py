@@ -12,11 +12,17 @@ One JSON object, the same shape for every model::
      "held": "..." or null,
      "initial_states": {"4V_xmotion.mcap": "rest" or "estimated"},
      "known_points": {"fit": 1904.5, "the start": 1.1e13, ...} (the simulation criterion,
-                     chi^2 / 2, of the fit and the points it knows; {} if not compared)}
+                     chi^2 / 2, of the fit and the points it knows; {} if not compared),
+     "starts": {"reached_best": 3, "outcomes": [{"label": "the start", "success": true,
+                "criterion": 1904.5}, ...]} (a multistart portfolio, ``--starts N``; null
+                without one)}
 
 Values are SI, in the parameter's ``unit``. Parameters that were not free have ``std`` and
 ``interval_95`` null; numbers that are not finite (an interval the data do not bound) are null.
 ``at_bound``: the box, not the data, stopped the parameter (its interval ends at the bound).
+``open_ended``: ``"above"`` or ``"below"`` for a parameter on the widened box that the data
+bound on the other side only (``fitting.open_ended``; its interval's open end is null), else
+null.
 A fit of several recordings that was cross-validated adds ``interval_95_jackknife`` (the
 experiment-level jackknife's, ``fitting.jackknife``) to each free parameter it moved.
 """
@@ -28,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from hframe_id.fitting.fit import FitResult
+from hframe_id.fitting.multistart import reached_best
 
 
 def _number(value: float) -> float | None:
@@ -49,6 +56,7 @@ def fit_summary(
             "free": bool(est.free),
             "identified": bool(est.identified),
             "at_bound": bool(est.at_bound),
+            "open_ended": est.open_ended or None,
             "initial": _number(est.initial),
         }
         if est.jackknife_ci95:
@@ -83,4 +91,18 @@ def fit_summary(
             label: _number(value)
             for label, value in result.diagnostics.get("known_points", {}).items()
         },
+        "starts": _starts(result.diagnostics.get("starts")),
+    }
+
+
+def _starts(outcomes) -> dict[str, Any] | None:
+    """The portfolio's outcomes (``multistart.StartOutcome``) as plain data, or None."""
+    if not outcomes:
+        return None
+    return {
+        "reached_best": reached_best(outcomes),
+        "outcomes": [
+            {"label": o.label, "success": o.success, "criterion": _number(o.criterion)}
+            for o in outcomes
+        ],
     }
