@@ -273,6 +273,23 @@ class FitResult:
             f"noise levels): {own:.6g}; the best known point, {label}: {others[label]:.6g}"
         )
 
+    @property
+    def multistart_statement(self) -> str | None:
+        """How many starts of a multistart portfolio reached the best optimum
+        (``hframe_id.fitting.multistart``), or None without one."""
+        starts = self.diagnostics.get("starts")
+        return multistart_statement(starts) if starts else None
+
+    @property
+    def search_statements(self) -> tuple[str | None, ...]:
+        """Where the fit started and what it was compared with: the initial states, the
+        known points, the multistart portfolio (None where not applicable)."""
+        return (
+            self.initial_state_statement,
+            self.known_points_statement,
+            self.multistart_statement,
+        )
+
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted, 95 % interval, the jackknife's
         95 % interval (after a cross-validation), status (identified, held, at bound, poorly
@@ -306,16 +323,7 @@ class FitResult:
                 f"{est.key:<22} {est.initial:>11.5g} {est.estimate:>11.5g} "
                 f"[{est.ci95[0]:>10.5g}, {est.ci95[1]:>10.5g}]{extra}  {status}"
             )
-        starts = self.diagnostics.get("starts")
-        lines += [
-            s
-            for s in (
-                self.initial_state_statement,
-                self.known_points_statement,
-                multistart_statement(starts) if starts else None,
-            )
-            if s
-        ]
+        lines += [s for s in self.search_statements if s]
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "
             f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} noise std, "

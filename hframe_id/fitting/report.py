@@ -28,6 +28,7 @@ import numpy as np
 from hframe_id.atomic import replace_atomically, staged_directory
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.fit import MISMATCH_RMS, FitResult
+from hframe_id.fitting.multistart import reached_best
 from hframe_id.fitting.problem import applied_inputs
 from hframe_id.fitting.report_figures import (
     SCALE,
@@ -147,6 +148,18 @@ def mismatch_statement(result: FitResult) -> str | None:
         "are model error more than noise."
         + _settling_text(noise.get("settling"))
         + _best_known_text(result.diagnostics.get("known_points"))
+        + _portfolio_text(result.diagnostics.get("starts"))
+    )
+
+
+def _portfolio_text(outcomes) -> str:
+    """How many starts of a multistart portfolio reached this optimum (more evidence that it
+    is the best the model can do); empty without a portfolio."""
+    if not outcomes:
+        return ""
+    return (
+        f" {reached_best(outcomes)} of {len(outcomes)} starts of a multistart portfolio "
+        "reached this optimum."
     )
 
 
@@ -395,11 +408,7 @@ def _status_lines(result: FitResult, recordings: list[Recording], parameter_file
         else "- parameter file: none written (the fit failed; do not use these values)",
         f"- uncertainty: {result.options.uncertainty} method, "
         f"{round(100 * result.options.confidence)} % intervals",
-        *(
-            f"- {line}"
-            for line in (result.initial_state_statement, result.known_points_statement)
-            if line
-        ),
+        *(f"- {line}" for line in result.search_statements if line),
         "",
     ]
 

@@ -212,3 +212,16 @@ def test_mismatch_is_stated_with_the_points_the_fit_beat(mismatched):
     others = [k for k in result.diagnostics["known_points"] if k != "fit"]
     assert f"better than the {len(others)} other point(s) it knows" in statement
     assert all(label in statement for label in others)
+
+
+def test_mismatch_is_stated_with_the_portfolio_that_reached_it(mismatched):
+    """A multistart portfolio's outcome is evidence too (issue 25, item 3)."""
+    from hframe_id.fitting.multistart import StartOutcome
+
+    result, _ = mismatched
+    outcomes = [StartOutcome("the start", True, 10.0), StartOutcome("seeded", True, 30.0)]
+    with_starts = dataclasses.replace(
+        result, diagnostics={**result.diagnostics, "starts": outcomes}
+    )
+    assert "1 of 2 starts of a multistart portfolio" in mismatch_statement(with_starts)
+    assert "multistart: 1 of 2 starts reached" in with_starts.summary()
