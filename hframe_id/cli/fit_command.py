@@ -397,18 +397,6 @@ def _options(args: argparse.Namespace) -> FitOptions:
     )
 
 
-def _with_model_defaults(options: FitOptions, args: argparse.Namespace, variant: str):
-    """The options with the model's fit defaults where the command line set nothing."""
-    from hframe_id.models import declaration
-
-    declared = declaration(variant)
-    unset = {k: v for k, v in declared.fit_defaults if getattr(args, k) is None}
-    try:
-        return dataclasses.replace(options, **unset)
-    except OptionError as err:
-        raise OptionError(f"{declared.source}: fit default: {err}") from None
-
-
 def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path]:
     """The start of the fit and its file, which must be of the fitted ``variant``."""
     from hframe_id.models import declaration
@@ -545,7 +533,7 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
     variant = model or recordings[0].variant
     if not model:
         initial, initial_path = _initial(args, variant)
-    options = _with_model_defaults(options, args, variant)
+    options = options.for_model(variant)
     if args.known:
         from hframe_id.parameters import load_parameter_file
 

@@ -424,7 +424,7 @@ def fit_recordings(
         variants, unknown parameter names, bounds excluding the initial value, too few
         valid samples).
     """
-    options = options or FitOptions()
+    options = (options or FitOptions()).for_model(initial.variant)
     start = time.perf_counter()
     if options.starts > 1:
         result = _portfolio(recordings, initial, options)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from hframe_id.errors import OptionError
@@ -23,6 +23,10 @@ UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
 SOLVERS = ("gauss-newton", "ipopt")
 CONTINUITY = ("exact", "none")
+#: Transcription of a model that declares no ``fit_defaults``: windows of 10 samples (a
+#: node every 10 ms at 1 kHz) joined into one simulated trajectory.
+DEFAULT_SHOOTING_INTERVAL = 10
+DEFAULT_CONTINUITY = "exact"
 INITIAL_STATES = ("auto", "rest", "estimate")
 CONSIDER_METHODS = ("linear", "refit", "prior")
 
@@ -158,8 +162,11 @@ class FitOptions:
         likelihood with unknown channel variances, iterated, floored at the sensor's std);
         ``"auto"`` (default): estimated if the sensor-weighted fit does not reach the noise
         level (model mismatch, as on every real rig), else the sensor's.
-    shooting_interval : samples per shooting window (a node every this many samples).
-    continuity : ``"exact"`` (default): the windows of an experiment join into one simulated
+    shooting_interval : samples per shooting window (a node every this many samples). None
+        (default): the model's declared fit default (``fit_defaults``), else
+        ``DEFAULT_SHOOTING_INTERVAL`` (10); see ``for_model``.
+    continuity : None (default): the model's declared fit default, else ``"exact"``.
+        ``"exact"``: the windows of an experiment join into one simulated
         trajectory (output error; the interval only shapes the path of the solver).
         ``"none"``: every window starts from its own estimated state and is simulated over
         ``shooting_interval`` samples only: a prediction-error fit on horizons of that
@@ -236,8 +243,8 @@ class FitOptions:
     latency_samples: Mapping[str, int] = field(default_factory=dict)
     consider: Mapping[str, float] | None = None
     consider_method: str = "linear"
-    shooting_interval: int = 10
-    continuity: str = "exact"
+    shooting_interval: int | None = None
+    continuity: str | None = None
     initial_state: str = "auto"
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
@@ -292,7 +299,7 @@ class FitOptions:
             )
         for name, value in self.channel_std.items():
             _positive(f"channel_std[{name!r}]", value)
-        if (
+        if self.shooting_interval is not None and (
             isinstance(self.shooting_interval, bool)
             or not isinstance(self.shooting_interval, int)
             or self.shooting_interval < 1
@@ -361,7 +368,7 @@ class FitOptions:
                 f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
                 f"got {self.initial_state!r}"
             )
-        if self.continuity not in CONTINUITY:
+        if self.continuity is not None and self.continuity not in CONTINUITY:
             raise OptionError(
                 f"continuity must be one of {', '.join(CONTINUITY)}, got {self.continuity!r}"
             )
@@ -397,6 +404,25 @@ class FitOptions:
                 raise OptionError(
                     f"known_points must be ParameterSet objects, got {type(params).__name__}"
                 )
+
+    def for_model(self, variant: str) -> FitOptions:
+        """These options with every setting left to the model (None) resolved: the
+        declaration's ``fit_defaults`` (e.g. the EMPS axis: 50-sample prediction-error
+        horizons), else the library's defaults. ``fit_recordings`` calls it, so a fit from
+        Python runs what ``hframe-id fit`` runs."""
+        from hframe_id.models import declaration
+
+        declared = declaration(variant)
+        defaults = {
+            "shooting_interval": DEFAULT_SHOOTING_INTERVAL,
+            "continuity": DEFAULT_CONTINUITY,
+            **dict(declared.fit_defaults),
+        }
+        unset = {k: v for k, v in defaults.items() if getattr(self, k) is None}
+        try:
+            return replace(self, **unset)
+        except OptionError as err:
+            raise OptionError(f"{declared.source}: fit default: {err}") from None
 
     @property
     def problem_options(self) -> ProblemOptions:

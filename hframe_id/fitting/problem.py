@@ -418,7 +418,6 @@ def build_problem(
     unknown free parameter names (suggesting the nearest), a free parameter at zero (log
     scale), bounds excluding the initial value, too few valid samples.
     """
-    wanted = options.problem_options  # what this builder reads; ``options`` is kept whole
     recordings = list(recordings)
     if not recordings:
         raise FitError("no recordings to fit")
@@ -429,6 +428,8 @@ def build_problem(
     if not isinstance(initial, ParameterSet):
         raise FitError(f"initial must be a ParameterSet, got {type(initial).__name__}")
     model = build_model(initial.variant)
+    options = options.for_model(initial.variant)
+    wanted = options.problem_options  # what this builder reads; ``options`` is kept whole
     if initial.variant != recordings[0].variant:
         # A different model of the same rig is fine if it has the same inputs and outputs
         # (hframe-20 on hframe-8 records: phi1, phi2, x, y from u1, u2).

@@ -13,7 +13,6 @@ from typing import Any
 from hframe_id.digests import sha256_file
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fleet.manifest import FitJob
-from hframe_id.models import declaration
 
 #: FitOptions fields that do not change a fit's result, left out of its key.
 _NOT_IN_KEY = ("verbose", "progress", "threads")
@@ -28,8 +27,7 @@ def batch_options(job: FitJob) -> FitOptions:
 def batch_options_for(model: str, free: tuple[str, ...] | None) -> FitOptions:
     """The options of a batch fit of ``model``: its declared fit defaults, ``free`` (None:
     the model's default free set), one thread, no progress output."""
-    options = FitOptions(free=free, threads=1, verbose=0)
-    return dataclasses.replace(options, **dict(declaration(model).fit_defaults))
+    return FitOptions(free=free, threads=1, verbose=0).for_model(model)
 
 
 def job_key(job: FitJob, options: FitOptions, digests: list[str]) -> str:

@@ -182,3 +182,21 @@ def test_each_component_reads_its_own_options():
     assert options.problem_options.bound_factor == 3.0
     assert options.solver_options.max_iterations == options.max_iterations
     assert options.statistics_options.confidence == 0.95
+
+
+def test_the_library_applies_the_models_fit_defaults():
+    """A fit from Python runs the transcription ``hframe-id fit`` runs (issue 26): settings
+    left to the model take its declared ``fit_defaults``, else the library's."""
+    from hframe_id.fitting.options import DEFAULT_CONTINUITY, DEFAULT_SHOOTING_INTERVAL
+    from hframe_id.models.user import load_model_file
+
+    load_model_file(Path(__file__).resolve().parents[2] / "models" / "emps_axis.py")
+    emps = FitOptions().for_model("emps-axis")
+    assert (emps.shooting_interval, emps.continuity) == (50, "none")
+    given = FitOptions(shooting_interval=20).for_model("emps-axis")
+    assert (given.shooting_interval, given.continuity) == (20, "none")
+    plain = FitOptions().for_model("hframe-8")
+    assert (plain.shooting_interval, plain.continuity) == (
+        DEFAULT_SHOOTING_INTERVAL,
+        DEFAULT_CONTINUITY,
+    )
