@@ -39,8 +39,10 @@ format: $(STAMP)
 fit: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/hframe-id fit $(DATA) $(FIT_ARGS)
 
+# The package's sections, then the checkout's unseen-plants section (bench/, 9-13 minutes).
 bench: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m hframe_id.bench
+	MPLBACKEND=Agg $(BIN)/python -m bench.unseen_plants
 
 datasets: $(STAMP)
 	$(BIN)/hframe-id datasets make --out datasets
