@@ -41,7 +41,7 @@ from hframe_id.fitting.known_points import known_points, reference_sets, simulat
 from hframe_id.fitting.multistart import judged, seeded_starts
 from hframe_id.fitting.multistart import statement as multistart_statement
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
-from hframe_id.fitting.open_ended import open_ends
+from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
 from hframe_id.fitting.options import (
     HELD_PRIOR_RELATIVE_STD,
     FitOptions,
@@ -433,7 +433,7 @@ def fit_recordings(
     # The known points are judged by simulation from the recordings' start: the criterion of
     # an output-error fit. A prediction-error fit (continuity "none", for plants whose
     # simulation drifts) has no such criterion to compare by.
-    if result.success and options.continuity == "exact":
+    if options.continuity == "exact":
         result = _never_worse_than_known(recordings, initial, options, result)
     result.wall_time_s = time.perf_counter() - start
     return result
@@ -567,8 +567,7 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
     """(label, parameter set) of the points a fit must not end worse than
     (``known_points``): the start, the equation-error estimate, the model's reference files
     and the user's ``FitOptions.known_points``, each with the start's fixed parameters and its
-    free values clipped into the fit's box (the user's bounds hold for every point the fit
-    may continue from); sets equal in their free values once."""
+    free values clipped into the user's bounds; sets equal in their free values once."""
     problem = result.problem
     ms = MultipleShooting(problem)
     ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
@@ -584,9 +583,13 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
             for i, p in enumerate(options.known_points)
         ),
     ]
+    # The user's bounds and physics (0 of a friction fitted linearly) hold for every point the
+    # fit may continue from; the default box, drawn around the start, does not.
+    lower = np.where(problem.box_lower, -np.inf, problem.theta_lower)
+    upper = np.where(problem.box_upper, np.inf, problem.theta_upper)
     unique = {}
     for label, theta in thetas:
-        values = problem.parameters(np.clip(theta, problem.theta_lower, problem.theta_upper))
+        values = problem.parameters(np.clip(theta, lower, upper))
         free = {n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
         unique.setdefault(tuple(free.values()), (label, initial.replace_values(**free)))
     return list(unique.values())
@@ -596,7 +599,8 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
     written file (a free-run simulation of each record from the fit's initial state,
     ``known_points.simulation_criterion``): ended worse than one, it continues from the best
-    of them; worse still, it fails saying so."""
+    of them; worse still, it fails saying so. A fit that failed (no file: criterion inf)
+    continues from the best point other than its start, where it has already failed."""
     std = dict(result.diagnostics["channel_std"])
     latency = dict(options.latency_samples)
     # Every point starts where the fit's trajectory does: its estimated initial state (a
@@ -607,22 +611,36 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     def criterion(params):
         return simulation_criterion(params, recordings, std, latency, starts)
 
-    own = criterion(result.parameters)
+    own = criterion(result.parameters) if result.success else math.inf
     candidates = _known_candidates(recordings, initial, options, result)
+    if not result.success:
+        candidates = [(label, params) for label, params in candidates if label != "the start"]
+    if not candidates:
+        return result
     points = known_points(candidates, recordings, std, latency, starts)
     best = points[0]
     report = {"fit": own, **{p.label: p.criterion for p in points}}
-    if best.criterion >= own:
+    # Differences under LIKELIHOOD_RATIO_95 (chi^2 / 2) are not significant at 95 %: such a
+    # point is not better, and a continued fit that ends there has reached it.
+    if best.criterion >= own - LIKELIHOOD_RATIO_95:
         result.diagnostics["known_points"] = report
         return result
     again = _started_from(_fit_widening(recordings, best.parameters, options), initial)
-    continued = criterion(again.parameters) if again.success else math.inf
+    continued = (
+        simulation_criterion(again.parameters, recordings, std, latency, list(again.initial_states))
+        if again.success
+        else math.inf
+    )
     report[f"fit continued from {best.label}"] = continued
-    if continued <= best.criterion:
+    if continued <= best.criterion + LIKELIHOOD_RATIO_95:
         again.diagnostics["known_points"] = report
-        again.message += f"; continued from {best.label}, where the first fit ended worse"
+        why = "failed" if not result.success else "ended worse"
+        again.message += f"; continued from {best.label}, where the first fit {why}"
         return again
     result.diagnostics["known_points"] = report
+    if not result.success:
+        ended = "failed too" if not again.success else f"ended worse than it ({continued:.6g})"
+        return replace(result, message=result.message + f"; a fit from {best.label} {ended}")
     return replace(
         result,
         success=False,

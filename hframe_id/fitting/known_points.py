@@ -20,7 +20,10 @@ estimated),
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2.
 
 Each known point enters with the fit's fixed parameters and its own values of the free ones,
-clipped into the fit's box (``fit._known_candidates``).
+clipped into the user's bounds, not into the default box drawn around the start
+(``fit._known_candidates``). A point counts as better when its criterion is lower by more
+than ``open_ended.LIKELIHOOD_RATIO_95`` (1.92: significant at 95 %). A fit that failed is
+continued from the best point other than its start.
 """
 
 from __future__ import annotations

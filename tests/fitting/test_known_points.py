@@ -1,5 +1,7 @@
 """Never worse than a point the fit knows (issue 25, item 2), and the box it searches."""
 
+import math
+
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
@@ -104,3 +106,19 @@ def test_a_given_bound_is_the_users_decision(table, steps):
     assert result.success, result.message
     assert result.estimates["k_l"].at_bound
     assert result.diagnostics["at_default_box"] == ()
+
+
+def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, steps, truth):
+    """k_l 0.95 x the start, boxes of x/÷1.001 (widened twice): the fit from the start fails
+    on the box; the truth, named as a known point, is not clipped into that box, and the fit
+    from it succeeds."""
+    start = table.replace_values(M_cart=1.15, F_c_cart=0.3)
+    options = FitOptions(free=("k_l",), bound_factor=1.001, known_points=(truth,))
+    result = fit_recordings(steps, start, options)
+    assert result.success, result.message
+    assert "continued from known point 1" in result.message
+    assert "where the first fit failed" in result.message
+    assert result.parameters.values["k_l"] == pytest.approx(truth.values["k_l"], rel=1e-3)
+    assert result.initial is start
+    points = result.diagnostics["known_points"]
+    assert points["fit"] == math.inf  # the first fit wrote no file
