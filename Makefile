@@ -29,19 +29,19 @@ test-all: $(STAMP)
 	$(PYTEST)
 
 lint: $(STAMP)
-	$(BIN)/ruff check hframe_id tests
-	$(BIN)/ruff format --check hframe_id tests
+	$(BIN)/ruff check hframe_id bench studies tests
+	$(BIN)/ruff format --check hframe_id bench studies tests
 
 format: $(STAMP)
-	$(BIN)/ruff format hframe_id tests
-	$(BIN)/ruff check --fix hframe_id tests
+	$(BIN)/ruff format hframe_id bench studies tests
+	$(BIN)/ruff check --fix hframe_id bench studies tests
 
 fit: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/hframe-id fit $(DATA) $(FIT_ARGS)
 
 # The package's sections, then the checkout's unseen-plants section (bench/, 9-13 minutes).
 bench: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m hframe_id.bench
+	MPLBACKEND=Agg $(BIN)/python -m bench
 	MPLBACKEND=Agg $(BIN)/python -m bench.unseen_plants
 
 datasets: $(STAMP)

@@ -35,13 +35,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench import heading
+from bench.fitting import DATASETS, EXPERIMENTS, MATCHED_REPEATS
 from hframe_id.atomic import replace_atomically
-from hframe_id.bench import heading
-from hframe_id.bench.fitting import DATASETS, EXPERIMENTS, MATCHED_REPEATS
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
-from hframe_id.studies.mismatch import TABLE_4_2
+from studies.mismatch import TABLE_4_2
 from studies.unseen_plants import (
     DEV_SEEDS,
     HELD_OUT_RATIO_MAX,

@@ -23,7 +23,7 @@ from hframe_id.fitting.problem import default_free
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.rig.realistic import shipped_plant
-from hframe_id.studies.mismatch import TABLE_4_2, training_recordings
+from studies.mismatch import TABLE_4_2, training_recordings
 from studies.unseen_plants import (
     NAMED,
     build_plant,

@@ -3,7 +3,7 @@
 Each plant is drawn from a wide envelope around the shipped realistic hframe-20 plant
 (``draw_plant``, seeded; the dev split is seeds 0..99, the test split 1000..1099 and runs only
 with ``--test-split``), or is one of the issue's named plants (``NAMED``). Per plant, as in the
-mismatch study (``hframe_id.studies.mismatch``): the six 1 s section-4.4 steps recorded from
+mismatch study (``studies.mismatch``): the six 1 s section-4.4 steps recorded from
 the plant (``TRAINING_SETS["steps"]``, sensor seeds 0..5), an hframe-8 fit from Table 4.2 with
 the default ``FitOptions()``, then two checks against the plant's own section-4.1 reduction
 (``plant.reference()``), both by free-run simulation from each recording's start
@@ -56,7 +56,8 @@ from hframe_id.resources import model_file
 from hframe_id.rig.plant import Plant
 from hframe_id.rig.realistic import SHIPPED_CONSTANTS, record_realistic, run_plant, shipped_plant
 from hframe_id.rig.sim import DEFAULT_TRAVEL_M
-from hframe_id.studies.mismatch import (
+from hframe_id.validation.replay import simulate_channels
+from studies.mismatch import (
     HELD_OUT,
     TABLE_4_2,
     TRAINING_SETS,
@@ -64,8 +65,7 @@ from hframe_id.studies.mismatch import (
     training_criterion,
     training_recordings,
 )
-from hframe_id.studies.mismatch_effects import record_smooth
-from hframe_id.validation.replay import simulate_channels
+from studies.mismatch_effects import record_smooth
 
 ROOT = Path(__file__).resolve().parents[1]
 TABLE_3_1 = model_file("hframe-20-table3.1.yaml")

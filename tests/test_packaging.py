@@ -61,6 +61,10 @@ def site(tmp_path_factory) -> Path:
     missing = [f for f in _shipped_sources() if f"hframe_id/_data/{f}" not in names]
     assert not missing, f"{wheel.name} lacks {missing}"
     assert "hframe_id/resources.py" in names
+    research = sorted(
+        n for n in names if n.split("/")[0] in ("studies", "bench") or "/studies/" in n
+    )
+    assert not research, f"{wheel.name} ships research code: {research[:5]}"
     assert wheel.stat().st_size < 10e6, "the wheel should hold the example data, not more"
     target = tmp / "site"
     install = ["install", "--no-deps", "--no-index", "--no-compile", "--target", str(target)]

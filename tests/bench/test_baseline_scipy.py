@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hframe_id.bench.baseline_scipy import (
+from bench.baseline_scipy import (
     BaselineOptions,
     default_free_names,
     fit_single_shooting,

@@ -3,14 +3,8 @@ without fitting (``python -m bench.unseen_plants`` runs the fits)."""
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import pytest
-
-# The section lives in the checkout (bench/, run as ``python -m bench.unseen_plants``), not in
-# the installed package: make the checkout importable however pytest was started.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench import unseen_plants as section
 from bench.unseen_plants import (

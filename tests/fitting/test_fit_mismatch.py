@@ -187,7 +187,7 @@ def test_a_success_under_mismatch_has_its_defects_at_tolerance():
     0.2-3 rad); then the fit stalled, its noise rounds starting from the second state pre-pass's
     discontinuous iterate. Now the noise rounds start from the moving windows' continuous
     trajectory and converge, defects at ``defect_tol``."""
-    from hframe_id.studies.mismatch_one_axis import TABLE_2_3, plant_for, pulse_recordings
+    from studies.mismatch_one_axis import TABLE_2_3, plant_for, pulse_recordings
 
     # The idler spring k3 runs to any box here (the model wants a rigid idler under the
     # mismatch): once on the default box x/÷10, now, widened to x/÷1e4 and still on it, a
@@ -206,14 +206,14 @@ def test_a_success_under_mismatch_has_its_defects_at_tolerance():
 
 @pytest.mark.slow
 def test_a_stalled_moving_window_stage_is_not_taken_for_mismatch():
-    """Matched one-axis data of held-study plant 4 (hframe_id.studies.held: the idler 15-19 %
+    """Matched one-axis data of held-study plant 4 (studies.held: the idler 15-19 %
     off Table 2.3, where the default fit holds it): the moving windows stall far from the
     data (residual rms 25 sensor std) from that start. That was taken for model mismatch: the
     fit skipped the all-window stages and the restarts, estimated noise levels 25x the
     sensors' and ended at a wrong optimum whose intervals missed J_1, B_1 and b. A stalled
     stage is no evidence of mismatch: the fit now goes on with the sensors' noise levels,
     through the restarts, and every identified interval holds the truth."""
-    from hframe_id.studies.held import run_trial
+    from studies.held import run_trial
 
     # Measured with the initial states estimated, as when this was written. With the records'
     # velocities held at rest (the default since 2026-11-25) plant 4 ends at another optimum,

@@ -74,7 +74,7 @@ def test_fresh_plants_from_starts_off_by_10_percent(seed):
     (|error| / std error measured <= 1.7; asserted < 3). From Table 2.3: 9 of 10; from x/÷3:
     6 of 10, the other 4 reported as failed (docs/fitting.md).
     """
-    from hframe_id.studies.recovery import run_trial
+    from studies.recovery import run_trial
 
     trial = run_trial("one-axis", seed, start_factor=1.1)
     print(trial.errors, trial.stages)

@@ -1,6 +1,6 @@
 """Recovery on simulated data: the issue's accuracy, robustness and coverage targets.
 
-The study (``hframe_id.studies.recovery``) draws a plant that is not a shipped file (Table 4.2
+The study (``studies.recovery``) draws a plant that is not a shipped file (Table 4.2
 values times log-uniform factors within x/÷1.3, per seed), simulates the six step experiments
 of section 4.4 with the rig's sensor models (321084-count encoders, 5 um lasers with their
 5 cm range, 12-bit DAC), and starts every free parameter off by a log-uniform factor within
@@ -17,7 +17,7 @@ Tolerances:
 import numpy as np
 import pytest
 
-from hframe_id.studies.recovery import run_trial
+from studies.recovery import run_trial
 
 #: the 10-seed recovery study, about 1 min: run by `make test-all` (and CI), not `make test`.
 pytestmark = pytest.mark.slow

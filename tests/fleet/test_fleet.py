@@ -27,8 +27,8 @@ from hframe_id.fleet.drift import DEFAULT_THRESHOLD
 from hframe_id.fleet.manifest import ManifestError, load_manifest
 from hframe_id.fleet.runner import local_cluster, run_batch
 from hframe_id.fleet.store import ResultsStore, read_results
-from hframe_id.fleet.studies import run_trials
 from hframe_id.resources import models_dir
+from studies.fleet import run_trials
 
 
 @pytest.fixture(scope="module")

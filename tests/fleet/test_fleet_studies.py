@@ -17,17 +17,17 @@ import pytest
 import yaml
 
 from hframe_id.fleet import synthetic
-from hframe_id.fleet.studies import (
-    main,
-    run_bootstrap,
-    study_setup,
-    summarize_bootstrap,
-)
 from hframe_id.fleet.synthetic import make_fleet
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
 from hframe_id.resources import datasets_dir
 from hframe_id.rig.plant import recording_plant
+from studies.fleet import (
+    main,
+    run_bootstrap,
+    study_setup,
+    summarize_bootstrap,
+)
 
 DATASETS = datasets_dir()
 RECORDINGS = [str(DATASETS / f) for f in ("2V_xmotion.mcap", "4V_xmotion.mcap", "4V_ymotion.mcap")]

@@ -1,6 +1,6 @@
 """The held-parameter study's counting: which intervals each coverage line counts."""
 
-from hframe_id.studies.held import coverage_counts
+from studies.held import coverage_counts
 
 IDLER = ("J_2", "B_2", "tau_c2")
 

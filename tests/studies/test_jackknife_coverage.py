@@ -2,7 +2,7 @@
 
 import pytest
 
-from hframe_id.studies.jackknife_coverage import holds, main
+from studies.jackknife_coverage import holds, main
 
 
 def test_holds_counts_intervals_over_seeds_and_parameters():

@@ -9,9 +9,9 @@ import pytest
 
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.realistic import realistic_plant, record_realistic, shipped_plant
-from hframe_id.studies import mismatch, mismatch_effects
-from hframe_id.studies.mismatch import HELD_OUT, MismatchTrial, training_recordings
-from hframe_id.studies.mismatch_effects import (
+from studies import mismatch, mismatch_effects
+from studies.mismatch import HELD_OUT, MismatchTrial, training_recordings
+from studies.mismatch_effects import (
     at_least_as_good,
     record_smooth,
     variants,

@@ -9,9 +9,9 @@ import yaml
 from hframe_id.errors import OptionError
 from hframe_id.parameters import load_parameter_file
 from hframe_id.resources import datasets_dir
-from hframe_id.studies import mismatch_one_axis
-from hframe_id.studies.mismatch import parse_latency
-from hframe_id.studies.mismatch_one_axis import (
+from studies import mismatch_one_axis
+from studies.mismatch import parse_latency
+from studies.mismatch_one_axis import (
     HELD_OUT,
     plant_for,
     pulse_recordings,

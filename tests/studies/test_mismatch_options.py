@@ -2,8 +2,8 @@
 
 import pytest
 
-from hframe_id.studies import mismatch
-from hframe_id.studies.mismatch import HELD_OUT, TRAINING_SETS, plant_for, training_recordings
+from studies import mismatch
+from studies.mismatch import HELD_OUT, TRAINING_SETS, plant_for, training_recordings
 
 
 def test_multisine_training_set_is_the_steps_and_a_multisine_of_other_seeds():
@@ -41,7 +41,7 @@ def test_training_criterion_prefers_the_parameters_that_made_the_data():
 
     from hframe_id.parameters import load_parameter_file
     from hframe_id.recordings.simulated import simulate_recording
-    from hframe_id.studies.mismatch import TABLE_4_2, training_criterion
+    from studies.mismatch import TABLE_4_2, training_criterion
 
     table = load_parameter_file(TABLE_4_2)
     u = np.zeros((300, 2))

@@ -3,23 +3,17 @@ fit takes 10-120 s; ``python -m studies.unseen_plants`` runs them)."""
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-# The study lives in the checkout (studies/, run as ``python -m studies.unseen_plants``), not in
-# the installed package: make the checkout importable however pytest was started.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.realistic import NOT_DRAWN, record_realistic, shipped_plant
-from hframe_id.studies.mismatch import HELD_OUT, STEP_PROTOCOLS, TABLE_4_2
-from hframe_id.studies.mismatch_effects import record_smooth
 from studies import unseen_plants as study
+from studies.mismatch import HELD_OUT, STEP_PROTOCOLS, TABLE_4_2
+from studies.mismatch_effects import record_smooth
 from studies.unseen_plants import (
     BELTS,
     COULOMB,

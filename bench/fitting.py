@@ -10,13 +10,13 @@ at least 15x faster than a fair SciPy single-shooting baseline measured in the s
   simulated from that truth file.
 - Starts: every free parameter (the fitter's default set) at the truth times a factor drawn
   log-uniformly from [1/3, 3], seeded; fitter and baseline start from the same points.
-- Baseline: :func:`hframe_id.bench.baseline_scipy.fit_single_shooting` with its defaults
+- Baseline: :func:`bench.baseline_scipy.fit_single_shooting` with its defaults
   (``least_squares`` trf on log parameters, exact compiled forward sensitivities, the fitter's
   bounds and substep rule), capped at ``baseline_max_time_s`` and ``BASELINE_MAX_NFEV``; a
   capped run counts as not converged and its time is a lower bound. Its finite-difference
   variant (what a SciPy user without AD writes) runs from the first ``fd_starts`` starts.
 - Sizes: ``n_starts`` (6), ``fd_starts`` (2) and ``baseline_max_time_s`` (150 s), set by
-  ``python -m hframe_id.bench --fit-starts N --fd-starts N --baseline-max-s S``; about 5-15
+  ``python -m bench --fit-starts N --fd-starts N --baseline-max-s S``; about 5-15
   minutes in all.
 - Converged: the solver reports success and every free parameter is within 1 % of the truth
   (the issue's recovery tolerance).
@@ -46,8 +46,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from hframe_id.bench import heading
-from hframe_id.bench.baseline_scipy import (
+from bench import heading
+from bench.baseline_scipy import (
     BaselineOptions,
     default_free_names,
     evaluation_timings,

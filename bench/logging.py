@@ -11,7 +11,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from hframe_id.bench import heading, median_time
+from bench import heading, median_time
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.reader import read_log, read_recording
 from hframe_id.recordings.writer import LogWriter

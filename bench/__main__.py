@@ -1,4 +1,4 @@
-"""Run every benchmark section: ``python -m hframe_id.bench [SECTION ...] [--no-realistic |
+"""Run every benchmark section: ``python -m bench [SECTION ...] [--no-realistic |
 --realistic-only] [--realistic-repeats N] [--fit-starts N] [--fd-starts N]
 [--baseline-max-s S] [--batch-rounds N]``.
 
@@ -13,7 +13,7 @@ import importlib
 import platform
 import sys
 
-#: Section modules under hframe_id.bench; each has ``run()`` that prints its results (the
+#: Section modules under bench; each has ``run()`` that prints its results (the
 #: fitting and batch sections take the keyword options built from the flags in ``main``).
 SECTIONS: tuple[str, ...] = ("cli", "simulation", "logging", "fitting", "batch")
 
@@ -46,7 +46,7 @@ def _seconds(text: str) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     """Parse the options, print the machine, run the sections named (all by default)."""
-    parser = argparse.ArgumentParser(prog="python -m hframe_id.bench")
+    parser = argparse.ArgumentParser(prog="python -m bench")
     parser.add_argument("sections", nargs="*", metavar="SECTION", help=f"one of {SECTIONS}")
     realistic = parser.add_mutually_exclusive_group()
     realistic.add_argument(
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     options["fitting"].update(realistic=args.realistic, realistic_repeats=args.realistic_repeats)
     for name in args.sections or SECTIONS:
-        importlib.import_module(f"hframe_id.bench.{name}").run(**options.get(name, {}))
+        importlib.import_module(f"bench.{name}").run(**options.get(name, {}))
     return 0
 
 

@@ -1,4 +1,4 @@
-"""``python -m hframe_id.fleet.studies recovery|multistart|bootstrap``: options, progress
+"""``python -m studies.fleet recovery|multistart|bootstrap``: options, progress
 lines, tables and ``--json``."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from hframe_id.errors import HframeIdError, OptionError
 from hframe_id.fleet.runner import dask_client
-from hframe_id.fleet.studies.runs import (
+from studies.fleet.runs import (
     run_bootstrap,
     run_multistart,
     run_trials,
@@ -22,8 +22,8 @@ from hframe_id.fleet.studies.runs import (
     summarize_bootstrap,
     summarize_multistart,
 )
-from hframe_id.fleet.studies.tasks import METHODS, FitOutcome
-from hframe_id.studies.recovery import Trial
+from studies.fleet.tasks import METHODS, FitOutcome
+from studies.recovery import Trial
 
 
 def _outcome_line(o: FitOutcome, what: str) -> str:
@@ -89,7 +89,7 @@ def _print_bootstrap(summary: dict[str, Any], method: str) -> None:
 
 def _study_parser(action: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog=f"python -m hframe_id.fleet.studies {action}",
+        prog=f"python -m studies.fleet {action}",
         description=(
             "Fit the recordings from N starts drawn around the initial file, one Dask task "
             "each; print each start, the best optimum, how many starts reached it and the "
@@ -154,7 +154,7 @@ def _study_main(action: str, argv: Sequence[str]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m hframe_id.fleet.studies [recovery] | multistart | bootstrap ...``: run a
+    """``python -m studies.fleet [recovery] | multistart | bootstrap ...``: run a
     study's fits on a Dask cluster and print its table (or ``--json``); exit status 2 on
     bad input."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -163,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv and argv[0] == "recovery":
         argv = argv[1:]
     parser = argparse.ArgumentParser(
-        prog="python -m hframe_id.fleet.studies [recovery]",
+        prog="python -m studies.fleet [recovery]",
         epilog="Also: 'multistart RECORDING ...' and 'bootstrap RECORDING ...' (see their --help).",
     )
     parser.add_argument("--variant", default="hframe-8")

@@ -5,9 +5,9 @@ plants whose idler (J_2, B_2, tau_c2) differs from the table by 10-20 %, and how
 refit``; or the idler estimated with the prior, ``--consider-method prior``) and without it
 (``consider={}``).
 
-    python -m hframe_id.studies.held --seeds 0 1 2 3 4 5 6 7 8 9
-    python -m hframe_id.studies.held --consider-method refit --seeds 0 1 2 3 4 5 6 7 8 9
-    python -m hframe_id.studies.held --consider-method prior --seeds 0 1 2 3 4 5 6 7 8 9
+    python -m studies.held --seeds 0 1 2 3 4 5 6 7 8 9
+    python -m studies.held --consider-method refit --seeds 0 1 2 3 4 5 6 7 8 9
+    python -m studies.held --consider-method prior --seeds 0 1 2 3 4 5 6 7 8 9
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.options import CONSIDER_METHODS
 from hframe_id.models import declaration
 from hframe_id.parameters import load_parameter_file
-from hframe_id.studies.recovery import random_truth, simulate_set
+from studies.recovery import random_truth, simulate_set
 
 #: Truth spread of the other parameters around Table 2.3 (x/÷), as the recovery study's
 #: "from the table" runs; idler offsets drawn uniformly from this range with a random sign.

@@ -16,9 +16,9 @@ fit in percent per channel (``mismatch.simulation_fit``).
 At 0.71 ohm an 8 A current limit binds from about 5.7 V: the 10 V and the 7 V pulses drive
 the stage alike (the model, without the limit, expects them to differ).
 
-    python -m hframe_id.studies.mismatch_one_axis --seeds -1 0 1 2
-    python -m hframe_id.studies.mismatch_one_axis --seeds -1 --latency phi1=1,x=3
-    python -m hframe_id.studies.mismatch_one_axis --seeds -1 0 1 2 --latency phi1=1,x=3 \
+    python -m studies.mismatch_one_axis --seeds -1 0 1 2
+    python -m studies.mismatch_one_axis --seeds -1 --latency phi1=1,x=3
+    python -m studies.mismatch_one_axis --seeds -1 0 1 2 --latency phi1=1,x=3 \
         --model-file models/one_axis_current_limit.py
 """
 
@@ -35,7 +35,7 @@ from hframe_id.resources import model_file
 from hframe_id.rig.plant import Plant
 from hframe_id.rig.protocols import MultisineProtocol, PulseProtocol
 from hframe_id.rig.realistic import realistic_plant, record_realistic, shipped_plant
-from hframe_id.studies.mismatch import (
+from studies.mismatch import (
     MismatchTrial,
     add_latency_argument,
     add_model_arguments,

@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from hframe_id.bench import heading, median_time
+from bench import heading, median_time
 from hframe_id.control.closed_loop import closed_loop_horizon, simulate_closed_loop
 from hframe_id.control.pid import ControllerOptions, ResetWindupPID
 from hframe_id.control.trajectory import motor_angles, square

@@ -1,6 +1,6 @@
 """A careful single-shooting fit with SciPy, the baseline the multiple-shooting fitter is timed by.
 
-Part of the benchmarks, not of the fitter: ``hframe_id.bench.fitting`` (``make bench``, section
+Part of the benchmarks, not of the fitter: ``bench.fitting`` (``make bench``, section
 fitting) runs it against ``fit_recordings`` from the same starts.
 
 The problem is the fitter's (same model, same RK4 with the same substep rule, same residuals,

@@ -1,6 +1,6 @@
 """Recovery and coverage studies on simulated data (used by tests/fitting/test_fit_recovery.py,
-tests/fitting/test_fit_one_axis.py, ``hframe_id.fleet.studies`` and
-``python -m hframe_id.studies.recovery``).
+tests/fitting/test_fit_one_axis.py, ``studies.fleet`` and
+``python -m studies.recovery``).
 
 A study draws, per seed, a plant that is not a shipped file (the thesis's values times
 log-uniform factors within x/÷ ``truth_spread``), simulates the standard experiments with the
@@ -138,8 +138,8 @@ def run_trial(
 
 
 def main(argv=None) -> int:
-    """``python -m hframe_id.studies.recovery``: one line per seed, then the coverage."""
-    parser = argparse.ArgumentParser(prog="python -m hframe_id.studies.recovery")
+    """``python -m studies.recovery``: one line per seed, then the coverage."""
+    parser = argparse.ArgumentParser(prog="python -m studies.recovery")
     parser.add_argument("--variant", default="hframe-8")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     parser.add_argument("--start-factor", type=float, default=3.0)

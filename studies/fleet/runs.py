@@ -18,14 +18,14 @@ from distributed import Client, as_completed
 from hframe_id.errors import OptionError
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fleet.keys import batch_options_for
-from hframe_id.fleet.studies.tasks import (
+from studies.fleet.tasks import (
     METHODS,
     FitOutcome,
     bootstrap_task,
     multistart_task,
     read_recordings,
 )
-from hframe_id.studies.recovery import Trial, run_trial
+from studies.recovery import Trial, run_trial
 
 #: Two optima whose costs (chi^2 / 2, noise-std units) differ by less than this are the same
 #: optimum: 0.5 is one unit of chi^2, a log-likelihood difference far below what any test

@@ -9,7 +9,7 @@ LocalCluster of 1 worker process and of 2, in the same run.
 - Dask: ``run_batch`` with a fresh store on a running LocalCluster of single-threaded worker
   processes (started before the timing; its start is reported on its own): submit, fit,
   gather, store written. Workers are warmed by the batch's plugin inside the timing.
-- Rounds: ``rounds`` (``python -m hframe_id.bench batch --batch-rounds N``, default 2)
+- Rounds: ``rounds`` (``python -m bench batch --batch-rounds N``, default 2)
   rounds of the three, interleaved, the best time of each kept (other processes' load only
   ever slows a run down); the 1-minute load average is printed per round, with the median
   time of one task ([task ...]: reading to parameter file written) in each run: tasks that
@@ -31,7 +31,7 @@ from pathlib import Path
 
 from distributed import Client
 
-from hframe_id.bench import heading
+from bench import heading
 from hframe_id.digests import sha256_file
 from hframe_id.fleet.job import fit_kinds, run_job, warm_up
 from hframe_id.fleet.keys import batch_options, job_key

@@ -16,7 +16,7 @@ import sys
 import tempfile
 import time
 
-from hframe_id.bench import heading
+from bench import heading
 from hframe_id.resources import dataset_file, model_file
 
 #: What the commands import between them: a process that imports these up front answers

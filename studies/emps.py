@@ -8,7 +8,7 @@ and, last, one continuous trajectory (``continuity="exact"``). Printed per fit: 
 their deviation from IDIM-LS, the robust 95 % intervals, residual rms, and the simulation fit
 of the whole record (open loop from the estimated initial state, ``hframe_id.validation``).
 
-    python -m hframe_id.studies.emps --horizons 10 20 50 100 200 500 1000
+    python -m studies.emps --horizons 10 20 50 100 200 500 1000
 """
 
 from __future__ import annotations

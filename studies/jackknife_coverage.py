@@ -7,7 +7,7 @@ Per noise seed: the six section-4.4 steps recorded from the shipped plant
 options, the leave-one-recording-out cross-validation (six more fits) and its jackknife
 intervals, as ``hframe-id fit`` gives them.
 
-    python -m hframe_id.studies.jackknife_coverage --noise-seeds 0 1 2 3 4
+    python -m studies.jackknife_coverage --noise-seeds 0 1 2 3 4
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import numpy as np
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.jackknife import add_jackknife_intervals
 from hframe_id.parameters import load_parameter_file
-from hframe_id.studies.mismatch import TABLE_4_2, coverage_of_mean, plant_for, training_recordings
 from hframe_id.validation.cross_validation import leave_one_out
+from studies.mismatch import TABLE_4_2, coverage_of_mean, plant_for, training_recordings
 
 
 def run_seed(noise_seed: int) -> tuple[dict, dict, bool]:

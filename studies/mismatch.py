@@ -15,9 +15,9 @@ from ``--initial``, by default the model's reference file) is judged against the
 above and against the reduction in that model (``reduction_in_model``: for the current-limited
 hframe-8, I_max the plant's amplifier limit).
 
-    python -m hframe_id.studies.mismatch --seeds 0 1 2 --noise-seeds 0 1 2 3 4
-    python -m hframe_id.studies.mismatch --train multisine --seeds -1 0 1
-    python -m hframe_id.studies.mismatch --model-file models/hframe8_current_limit.py --seeds -1
+    python -m studies.mismatch --seeds 0 1 2 --noise-seeds 0 1 2 3 4
+    python -m studies.mismatch --train multisine --seeds -1 0 1
+    python -m studies.mismatch --model-file models/hframe8_current_limit.py --seeds -1
 """
 
 from __future__ import annotations

@@ -14,10 +14,10 @@ recorded by the realistic rig with every other effect removed), trained on the s
 on the steps and a multisine (``--train``). Each variant is judged
 against its own reduction, which for every variant but the last is the base plant's.
 
-    python -m hframe_id.studies.mismatch_effects
-    python -m hframe_id.studies.mismatch_effects --variants shipped stick-slip-only
-    python -m hframe_id.studies.mismatch_effects --train multisine
-    python -m hframe_id.studies.mismatch_effects --variants no-current-limit --seeds -1 0 1
+    python -m studies.mismatch_effects
+    python -m studies.mismatch_effects --variants shipped stick-slip-only
+    python -m studies.mismatch_effects --train multisine
+    python -m studies.mismatch_effects --variants no-current-limit --seeds -1 0 1
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.plant import Plant
 from hframe_id.rig.realistic import record_realistic, shipped_plant
-from hframe_id.studies.mismatch import (
+from studies.mismatch import (
     TRAINING_SETS,
     MismatchTrial,
     Recorder,

@@ -1,1 +1,0 @@
-"""Studies of the estimators on simulated plants (measurements behind docs/fitting.md)."""

@@ -1,0 +1,7 @@
+"""``python -m studies.fleet``."""
+
+import sys
+
+from studies.fleet.cli import main
+
+sys.exit(main())
