@@ -1,8 +1,11 @@
 """Typed errors raised at the edges of hframe-id.
 
 Every error names what is at fault (file, field, value) so that the command line can print
-it as one clear line and exit non-zero, without a traceback from inside a library.
+it as one clear line and exit non-zero, without a traceback from inside a library; values
+are echoed through ``shown``, which bounds their length.
 """
+
+import reprlib
 
 
 class HframeIdError(Exception):
@@ -31,3 +34,26 @@ class RigFault(HframeIdError):
 
 class OptionError(HframeIdError):
     """A user-supplied option (command line or options dataclass) is out of range."""
+
+
+#: The most characters of a value an error message shows (``shown``).
+MAX_SHOWN = 80
+
+
+def _bounded_repr() -> reprlib.Repr:
+    shortened = reprlib.Repr()
+    shortened.maxlevel = 2
+    shortened.maxdict = shortened.maxlist = shortened.maxtuple = shortened.maxset = 4
+    shortened.maxstring = shortened.maxother = shortened.maxlong = 60
+    return shortened
+
+
+_REPR = _bounded_repr()
+
+
+def shown(value: object) -> str:
+    """A value as an error message shows it: its ``repr``, shortened to at most ``MAX_SHOWN``
+    characters (``...`` marks what is left out). The one rule for echoing what a file or a
+    user gave: a hostile value (a megabyte string, a YAML alias bomb) is never expanded."""
+    text = _REPR.repr(value)
+    return text if len(text) <= MAX_SHOWN else text[: MAX_SHOWN - 3] + "..."

@@ -29,9 +29,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from hframe_id.errors import HframeIdError
+from hframe_id.documents import load_yaml, read_text
+from hframe_id.errors import HframeIdError, shown
 from hframe_id.models import declaration, parameter_specs, variants
 from hframe_id.parameters import load_parameter_file
 
@@ -75,7 +74,7 @@ def load_manifest(path: str | Path) -> list[FitJob]:
     the model, free names match its parameters, time with a time zone)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = read_text(path, "manifest", ManifestError)
     except OSError as err:
         raise ManifestError(f"{path}: cannot read the manifest ({err.strerror})") from None
     if path.suffix.lower() == ".csv":
@@ -97,32 +96,29 @@ def load_manifest(path: str | Path) -> list[FitJob]:
 
 
 def _yaml_entries(path: Path, text: str) -> list[dict[str, Any]]:
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ManifestError(f"{path}: not valid YAML ({err})".replace("\n", " ")) from None
+    doc = load_yaml(text, str(path), ManifestError)
     if not isinstance(doc, dict) or not isinstance(doc.get("fits"), list):
         raise ManifestError(f"{path}: a manifest needs a 'fits' list")
     version = str(doc.get("format_version", ""))
     if version != FORMAT_VERSION:
         raise ManifestError(
-            f"{path}: field 'format_version': expected '{FORMAT_VERSION}', got {version!r}"
+            f"{path}: field 'format_version': expected '{FORMAT_VERSION}', got {shown(version)}"
         )
     unknown = sorted(set(doc) - {"format_version", "title", "defaults", "fits"})
     if unknown:
-        raise ManifestError(f"{path}: unknown top-level field {unknown[0]!r}")
+        raise ManifestError(f"{path}: unknown top-level field {shown(unknown[0])}")
     defaults = doc.get("defaults") or {}
     if not isinstance(defaults, dict):
         raise ManifestError(f"{path}: field 'defaults' must be a mapping")
     for key in defaults:
         if key not in DEFAULTABLE:
             raise ManifestError(
-                f"{path}: defaults: field {key!r} cannot have a default ({_suggest(key)})"
+                f"{path}: defaults: field {shown(key)} cannot have a default ({_suggest(key)})"
             )
     entries = []
     for number, entry in enumerate(doc["fits"], start=1):
         if not isinstance(entry, dict):
-            raise ManifestError(f"{path}: entry {number}: must be a mapping, got {entry!r}")
+            raise ManifestError(f"{path}: entry {number}: must be a mapping, got {shown(entry)}")
         entries.append({**defaults, **entry})
     return entries
 
@@ -152,26 +148,26 @@ def _job(path: Path, number: int, entry: dict[str, Any]) -> FitJob:
     where = f"{path}: entry {number}" + (f" (rig {rig})" if rig else "")
 
     def fail(field: str, problem: str) -> ManifestError:
-        return ManifestError(f"{where}: field {field!r}: {problem}")
+        return ManifestError(f"{where}: field {shown(field)}: {problem}")
 
     for key in entry:
         if key not in FIELDS:
-            raise ManifestError(f"{where}: unknown field {key!r} ({_suggest(key)})")
+            raise ManifestError(f"{where}: unknown field {shown(key)} ({_suggest(key)})")
     for key in REQUIRED:
         if key not in entry or entry[key] in (None, "", []):
             raise fail(key, "missing")
     if not isinstance(rig, str | int) or isinstance(rig, bool):
-        raise fail("rig", f"must be a name, got {rig!r}")
+        raise fail("rig", f"must be a name, got {shown(rig)}")
     time = _time(entry["time"], fail)
     model = entry["model"]
     if model not in variants():
-        raise fail("model", f"unknown model {model!r} (known: {', '.join(variants())})")
+        raise fail("model", f"unknown model {shown(model)} (known: {', '.join(variants())})")
     folder = path.parent.resolve()
     recordings = entry["recordings"]
     if isinstance(recordings, str):
         recordings = [recordings]
     if not isinstance(recordings, list) or not all(isinstance(p, str) for p in recordings):
-        raise fail("recordings", f"must be a list of files, got {recordings!r}")
+        raise fail("recordings", f"must be a list of files, got {shown(recordings)}")
     resolved = tuple(folder / p for p in recordings)
     for original, file in zip(recordings, resolved, strict=True):
         if not file.is_file():
@@ -183,7 +179,7 @@ def _job(path: Path, number: int, entry: dict[str, Any]) -> FitJob:
     else:
         initial = declaration(model).reference_file
         if initial is None:
-            raise fail("initial", f"missing (model {model!r} declares no reference file)")
+            raise fail("initial", f"missing (model {shown(model)} declares no reference file)")
     try:
         _check_start(initial, model)
     except HframeIdError as err:
@@ -205,7 +201,7 @@ def _time(value: Any, fail) -> dt.datetime:
         try:
             time = dt.datetime.fromisoformat(str(value))
         except ValueError:
-            raise fail("time", f"{value!r} is not an ISO 8601 time") from None
+            raise fail("time", f"{shown(value)} is not an ISO 8601 time") from None
     if time.tzinfo is None:
         raise fail("time", f"{value!s} lacks a time zone (e.g. +00:00)")
     return time.astimezone(dt.UTC)
@@ -218,11 +214,11 @@ def _free(entry: dict[str, Any], model: str, fail) -> tuple[str, ...] | None:
     if isinstance(free, str):
         free = [p.strip() for p in free.split(",") if p.strip()]
     if not isinstance(free, list) or not free or not all(isinstance(p, str) for p in free):
-        raise fail("free", f"must be a list of parameter names or patterns, got {free!r}")
+        raise fail("free", f"must be a list of parameter names or patterns, got {shown(free)}")
     names = [spec.name for spec in parameter_specs(model)]
     for pattern in free:
         if not fnmatch.filter(names, pattern):
             close = difflib.get_close_matches(pattern, names, n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise fail("free", f"{pattern!r} matches no parameter of {model}{hint}")
+            raise fail("free", f"{shown(pattern)} matches no parameter of {model}{hint}")
     return tuple(free)

@@ -35,7 +35,8 @@ from typing import Any
 import yaml
 
 from hframe_id.atomic import replace_atomically
-from hframe_id.errors import ModelError, ParameterFileError
+from hframe_id.documents import load_yaml, read_text
+from hframe_id.errors import ModelError, ParameterFileError, shown
 from hframe_id.models import declaration, load_model_file, parameter_specs, variants
 
 FORMAT_VERSION = "1.0"
@@ -80,13 +81,6 @@ class ParameterSet:
         return str(self.path) if self.path else f"<{self.variant} parameters>"
 
 
-def yaml_error_line(err: yaml.YAMLError) -> str:
-    """PyYAML's problem and its line/column, on one line."""
-    mark = getattr(err, "problem_mark", None)
-    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-    return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark else problem
-
-
 def suggest(word: str, choices: list[str]) -> str:
     """`` (did you mean 'x'?)`` for the choice closest to a mistyped word, or ''."""
     close = difflib.get_close_matches(word, choices, n=1, cutoff=0.5)
@@ -97,16 +91,18 @@ def check_header(doc: Any, required: tuple[str, ...], optional: tuple[str, ...],
     """A YAML document is a mapping with every ``required`` header key and no key outside
     ``required + optional`` (``ParameterFileError`` naming the file and the key)."""
     if not isinstance(doc, Mapping):
-        raise ParameterFileError(f"{where}: expected a YAML mapping with a header, got {doc!r}")
+        raise ParameterFileError(
+            f"{where}: expected a YAML mapping with a header, got {shown(doc)}"
+        )
     allowed = required + optional
     for key in doc:
         if key not in allowed:
             raise ParameterFileError(
-                f"{where}: unknown header key {key!r}{suggest(str(key), list(allowed))}"
+                f"{where}: unknown header key {shown(key)}{suggest(str(key), list(allowed))}"
             )
     for key in required:
         if key not in doc:
-            raise ParameterFileError(f"{where}: missing header key {key!r}")
+            raise ParameterFileError(f"{where}: missing header key {shown(key)}")
 
 
 def check_values(variant: str, values: Mapping[str, float], path: Path | None = None) -> None:
@@ -119,7 +115,7 @@ def check_values(variant: str, values: Mapping[str, float], path: Path | None = 
     for name in values:
         if name not in specs:
             raise ParameterFileError(
-                f"{where}: unknown parameter {name!r}{suggest(name, list(specs))}"
+                f"{where}: unknown parameter {shown(name)}{suggest(name, list(specs))}"
             )
     for spec in specs.values():
         if spec.required and spec.name not in values:
@@ -127,23 +123,22 @@ def check_values(variant: str, values: Mapping[str, float], path: Path | None = 
     for name, value in values.items():
         spec = specs[name]
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ParameterFileError(f"{where}: {spec.key} must be a number, got {value!r}")
+            raise ParameterFileError(f"{where}: {spec.key} must be a number, got {shown(value)}")
         if not math.isfinite(value):
-            raise ParameterFileError(f"{where}: {spec.key} must be finite, got {value!r}")
+            raise ParameterFileError(f"{where}: {spec.key} must be finite, got {shown(value)}")
         if spec.kind == "positive" and value <= 0:
-            raise ParameterFileError(f"{where}: {spec.key} must be > 0, got {value!r}")
+            raise ParameterFileError(f"{where}: {spec.key} must be > 0, got {shown(value)}")
         if spec.kind == "nonnegative" and value < 0:
-            raise ParameterFileError(f"{where}: {spec.key} must be >= 0, got {value!r}")
+            raise ParameterFileError(f"{where}: {spec.key} must be >= 0, got {shown(value)}")
 
 
 def _check_format_version(raw: Any, where: str) -> None:
-    text = str(raw)
-    major = text.split(".")[0]
+    major = str(raw).split(".")[0] if isinstance(raw, str | int | float) else ""
     if not major.isdigit():
-        raise ParameterFileError(f"{where}: format_version must look like '1.0', got {raw!r}")
-    if int(major) != SUPPORTED_MAJOR:
+        raise ParameterFileError(f"{where}: format_version must look like '1.0', got {shown(raw)}")
+    if major.lstrip("0") != str(SUPPORTED_MAJOR):
         raise ParameterFileError(
-            f"{where}: unknown format_version {raw!r}; this hframe-id reads "
+            f"{where}: unknown format_version {shown(raw)}; this hframe-id reads "
             f"{SUPPORTED_MAJOR}.x files"
         )
 
@@ -156,35 +151,11 @@ def _values_from_keys(variant: str, raw: Any, where: str) -> dict[str, float]:
     for key, value in raw.items():
         if key not in by_key:
             raise ParameterFileError(
-                f"{where}: unknown parameter key {key!r} (value {value!r})"
+                f"{where}: unknown parameter key {shown(key)} (value {shown(value)})"
                 f"{suggest(str(key), list(by_key))} for model {variant}"
             )
         values[by_key[key].name] = value
     return values
-
-
-#: Parameter files are a few kB (a fit's, with its correlation matrix, tens of kB); anything
-#: this large is not one, and reading it whole would only waste memory.
-MAX_FILE_BYTES = 10 * 2**20
-
-
-def read_text(path: Path, kind: str = "parameter file") -> str:
-    """The UTF-8 text of a parameter or plant file (``kind``, for the messages);
-    ``ParameterFileError`` for a binary, non-UTF-8 or oversized file, ``OSError`` if
-    it cannot be read at all."""
-    with path.open("rb") as stream:
-        data = stream.read(MAX_FILE_BYTES + 1)
-    if len(data) > MAX_FILE_BYTES:
-        raise ParameterFileError(f"{path}: larger than {MAX_FILE_BYTES // 2**20} MB; not a {kind}")
-    if b"\0" in data:
-        raise ParameterFileError(f"{path}: binary data, not a {kind} (YAML text)")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as err:
-        raise ParameterFileError(
-            f"{path}: not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}); "
-            f"save the {kind} as UTF-8"
-        ) from None
 
 
 def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> ParameterSet:
@@ -198,15 +169,12 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     path = Path(path)
     where = str(path)
     try:
-        text = read_text(path)
+        text = read_text(path, "parameter file", ParameterFileError)
     except FileNotFoundError:
         raise ParameterFileError(f"{where}: no such parameter file") from None
     except OSError as err:
         raise ParameterFileError(f"{where}: cannot read ({err.strerror})") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ParameterFileError(f"{where}: not valid YAML ({yaml_error_line(err)})") from None
+    doc = load_yaml(text, where, ParameterFileError)
     check_header(doc, _REQUIRED_HEADER, _OPTIONAL_HEADER, where)
     _check_format_version(doc["format_version"], where)
     model = doc["model"]
@@ -215,17 +183,19 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     known = variants()
     if model not in known:
         raise ParameterFileError(
-            f"{where}: model {model!r} is not a variant{suggest(str(model), list(known))};"
+            f"{where}: model {shown(model)} is not a variant{suggest(str(model), list(known))};"
             f" valid: {', '.join(known)} (a model of your own: --model-file FILE.py)"
         )
     if variant is not None and model != variant:
-        raise ParameterFileError(f"{where}: model is {model!r}, but {variant!r} is needed here")
+        raise ParameterFileError(
+            f"{where}: model is {shown(model)}, but {variant!r} is needed here"
+        )
     for key in ("references",):
         if key in doc and not isinstance(doc[key], list):
-            raise ParameterFileError(f"{where}: {key!r} must be a list")
+            raise ParameterFileError(f"{where}: {shown(key)} must be a list")
     for key in ("provenance", "uncertainty"):
         if key in doc and not isinstance(doc[key], Mapping):
-            raise ParameterFileError(f"{where}: {key!r} must be a mapping")
+            raise ParameterFileError(f"{where}: {shown(key)} must be a mapping")
     values = _values_from_keys(model, doc["parameters"], where)
     return ParameterSet(
         variant=model,

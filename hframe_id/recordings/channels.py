@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from hframe_id.errors import shown
 from hframe_id.recordings import log_format as fmt
 
 #: A channel name: an ASCII identifier, so that it is a plain field name in any MCAP tool.
@@ -86,13 +87,13 @@ class Channels:
             for name, unit in zip(names, units, strict=True):
                 if not NAME_PATTERN.match(name) or name.endswith(VALID_SUFFIX):
                     raise ValueError(
-                        f"{kind} name {name!r} must be an identifier (letters, digits, '_'; "
+                        f"{kind} name {shown(name)} must be an identifier (letters, digits, '_'; "
                         f"not starting with a digit) not ending in {VALID_SUFFIX!r}"
                     )
                 if unit not in SI_UNITS:
                     raise ValueError(
-                        f"{kind} {name}: unit {unit!r} is not an SI unit of the log format "
-                        f"({', '.join(SI_UNITS)})"
+                        f"{kind} {name}: unit {shown(unit)} is not an SI unit of the "
+                        f"log format ({', '.join(SI_UNITS)})"
                     )
         names = self.inputs + self.outputs + self.signals
         clashes = sorted(

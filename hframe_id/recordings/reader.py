@@ -14,7 +14,6 @@ killed; says how much was recovered) and ``SequenceGapWarning`` (samples lost on
 
 from __future__ import annotations
 
-import json
 import os
 import struct
 import tempfile
@@ -32,7 +31,8 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from hframe_id.errors import HframeIdError, LogFormatError
+from hframe_id.documents import load_json
+from hframe_id.errors import HframeIdError, LogFormatError, shown
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import Channels
@@ -86,14 +86,10 @@ class LogContents:
 
     def decoded(self, topic: str) -> list[dict[str, Any]]:
         """JSON messages of a topic, decoded."""
-        where = self.path
-        out = []
-        for i, (_, data) in enumerate(self.messages.get(topic, [])):
-            try:
-                out.append(json.loads(data))
-            except (ValueError, UnicodeDecodeError) as err:
-                raise LogFormatError(f"{where}: {topic} message {i} is not JSON ({err})") from None
-        return out
+        return [
+            load_json(data, f"{self.path}: {topic} message {i}", LogFormatError)
+            for i, (_, data) in enumerate(self.messages.get(topic, []))
+        ]
 
 
 def read_log(path: str | os.PathLike) -> LogContents:
@@ -242,29 +238,31 @@ def read_recording(path: str | os.PathLike) -> Recording:
         or schema.encoding != "jsonschema"
         or channel.message_encoding != "json"
     ):
-        found = f"{schema.name!r} ({schema.encoding})" if schema else "no schema"
+        found = f"{shown(schema.name)} ({schema.encoding})" if schema else "no schema"
         expected = " or ".join(repr(name) for name in _SAMPLE_SCHEMAS)
         raise LogFormatError(
-            f"{where}: {fmt.SAMPLE_TOPIC} has schema {found} with {channel.message_encoding!r}"
+            f"{where}: {fmt.SAMPLE_TOPIC} has schema {found} with {shown(channel.message_encoding)}"
             f" messages; expected {expected} (jsonschema) with 'json' messages"
         )
     experiment = _metadata(log, "experiment", fmt.EXPERIMENT_REQUIRED)
     version = experiment["format_version"]
     if fmt.major_version(version) != fmt.SUPPORTED_MAJOR:
         raise LogFormatError(
-            f"{where}: unknown log format version {version!r}; this hframe-id reads "
+            f"{where}: unknown log format version {shown(version)}; this hframe-id reads "
             f"{fmt.SUPPORTED_MAJOR}.x"
         )
     rig = _metadata(log, "rig", _SAMPLE_SCHEMAS[schema.name])
     variant = str(rig["variant"])
     if not fmt.VARIANT_PATTERN.match(variant):
         raise LogFormatError(
-            f"{where}: rig.variant {variant!r} is not a model variant name (letters, digits, "
+            f"{where}: rig.variant {shown(variant)} is not a model variant name (letters, digits, "
             "'-', '_')"
         )
     sample_period_s = rig["sample_period_s"]
     if not isinstance(sample_period_s, int | float) or not sample_period_s > 0:
-        raise LogFormatError(f"{where}: rig.sample_period_s must be > 0, got {sample_period_s!r}")
+        raise LogFormatError(
+            f"{where}: rig.sample_period_s must be > 0, got {shown(sample_period_s)}"
+        )
     if schema.name == fmt.SAMPLE_SCHEMA_NAME:
         decode = partial(decode_rig_samples, rig=rig)
     else:

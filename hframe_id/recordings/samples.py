@@ -15,12 +15,16 @@ from typing import Any
 import jsonschema
 import numpy as np
 
-from hframe_id.errors import LogFormatError
+from hframe_id.errors import LogFormatError, shown
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import HFRAME_UNITS, VALID_SUFFIX, Channels
 from hframe_id.recordings.sensors import ENCODER_OUTPUTS, LASER_OUTPUTS
 
 _RIG_SAMPLE_VALIDATOR = jsonschema.Draft202012Validator(fmt.SAMPLE_SCHEMA)
+#: The range of integer fields (``sequence``, ``device_time_us``, encoder counts): int64.
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
+#: The largest integer a number field may hold (beyond it no float can: 1.8e308).
+FLOAT_MAX = int(np.finfo(float).max)
 
 
 @dataclass(frozen=True)
@@ -60,8 +64,8 @@ def decode_rig_samples(
     bad_outputs = [n for n in output_names if n not in ENCODER_OUTPUTS + LASER_OUTPUTS]
     if not input_names or bad_inputs or not output_names or bad_outputs:
         raise LogFormatError(
-            f"{where}: rig.inputs {rig['inputs']!r} / rig.outputs {rig['outputs']!r} must name "
-            "u1, u2 and phi1, phi2, x, y"
+            f"{where}: rig.inputs {shown(rig['inputs'])} / rig.outputs "
+            f"{shown(rig['outputs'])} must name u1, u2 and phi1, phi2, x, y"
         )
     _check_fields(where, messages, _RIG_SAMPLE_VALIDATOR)
     sequence, device_time_us = _clock(where, messages)
@@ -146,7 +150,7 @@ def _flagged(
         i = int(np.argmax(bad))
         raise LogFormatError(
             f"{where}: sample {i} (sequence {sequence[i]}): {field} is "
-            f"{messages[i][field]!r} although {flag_field} is true"
+            f"{shown(messages[i][field])} although {flag_field} is true"
         )
     return value, flag
 
@@ -179,18 +183,27 @@ def column(
     if kind is bool:
         ok = [type(v) is bool for v in values]
     elif kind is int:
-        ok = [type(v) is int for v in values]
+        ok = [type(v) is int and INT64_MIN <= v <= INT64_MAX for v in values]
     else:
-        ok = [(type(v) in (int, float)) or (nullable and v is None) for v in values]
+        ok = [
+            type(v) is float or (type(v) is int and abs(v) <= FLOAT_MAX) or (nullable and v is None)
+            for v in values
+        ]
     if not all(ok):
         i = ok.index(False)
-        expected = {bool: "true/false", int: "an integer", float: "a number"}[kind]
-        raise LogFormatError(f"{where}: sample {i}: {name} must be {expected}, got {values[i]!r}")
+        expected = {
+            bool: "true/false",
+            int: "an integer in [-2^63, 2^63)",
+            float: "a number",
+        }[kind]
+        raise LogFormatError(
+            f"{where}: sample {i}: {name} must be {expected}, got {shown(values[i])}"
+        )
     if kind is float:
         array = np.array([np.nan if v is None else v for v in values], dtype=float)
         if not nullable and not np.isfinite(array).all():
             i = int(np.argmax(~np.isfinite(array)))
-            raise LogFormatError(f"{where}: sample {i}: {name} is not finite ({values[i]!r})")
+            raise LogFormatError(f"{where}: sample {i}: {name} is not finite ({shown(values[i])})")
         return array
     return np.array(values, dtype=bool if kind is bool else np.int64)
 

@@ -35,9 +35,9 @@ from typing import Any
 import yaml
 
 from hframe_id.digests import sha256_file
-from hframe_id.errors import OptionError, ParameterFileError
+from hframe_id.documents import load_yaml, read_text
+from hframe_id.errors import OptionError, ParameterFileError, shown
 from hframe_id.parameters import ParameterSet, load_parameter_file, save_parameter_file
-from hframe_id.parameters.files import read_text, yaml_error_line
 from hframe_id.resources import models_dir
 from hframe_id.rig.logger import RunOptions, RunSummary, run_experiment
 from hframe_id.rig.plant import Plant, load_plant_file, save_plant_file
@@ -324,19 +324,18 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
     """The manifest of a datasets folder, checked for the keys every entry needs."""
     path = Path(path)
     try:
-        doc = yaml.safe_load(read_text(path, "dataset manifest"))
+        text = read_text(path, "dataset manifest", ParameterFileError)
     except OSError as err:
         raise ParameterFileError(f"{path}: cannot read the dataset manifest ({err})") from None
-    except yaml.YAMLError as err:
-        raise ParameterFileError(f"{path}: not valid YAML ({yaml_error_line(err)})") from None
+    doc = load_yaml(text, str(path), ParameterFileError)
     if not isinstance(doc, dict) or not isinstance(doc.get("datasets"), list):
         raise ParameterFileError(f"{path}: a manifest needs a 'datasets' list")
     for entry in doc["datasets"]:
         if not isinstance(entry, dict):
-            raise ParameterFileError(f"{path}: entry {entry!r} is not a mapping")
+            raise ParameterFileError(f"{path}: entry {shown(entry)} is not a mapping")
         missing = [k for k in ("file", "sha256", "truth", "seed") if k not in entry]
         if missing:
-            raise ParameterFileError(f"{path}: entry {entry!r} lacks {', '.join(missing)}")
+            raise ParameterFileError(f"{path}: entry {shown(entry)} lacks {', '.join(missing)}")
     return doc
 
 

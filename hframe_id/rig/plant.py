@@ -44,10 +44,11 @@ import numpy as np
 import yaml
 
 from hframe_id.atomic import replace_atomically
-from hframe_id.errors import HframeIdError, ModelError, ParameterFileError
+from hframe_id.documents import load_yaml, read_text
+from hframe_id.errors import HframeIdError, ModelError, ParameterFileError, shown
 from hframe_id.models import Model, ModelOptions, build_model
 from hframe_id.parameters import ParameterSet, load_parameter_file
-from hframe_id.parameters.files import check_header, read_text, suggest, to_document
+from hframe_id.parameters.files import check_header, suggest, to_document
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.simulation.realistic import PlantConstants, realistic_substeps
 
@@ -117,21 +118,25 @@ class Plant:
         ]:
             value = getattr(c, name)
             if not (_is_number(value) and value > 0 and not math.isnan(value)):
-                raise ParameterFileError(f"{where}: {section}.{key} must be > 0, got {value!r}")
+                raise ParameterFileError(
+                    f"{where}: {section}.{key} must be > 0, got {shown(value)}"
+                )
             if math.isinf(value) and section != "amplifier":
-                raise ParameterFileError(f"{where}: {section}.{key} must be finite, got {value!r}")
+                raise ParameterFileError(
+                    f"{where}: {section}.{key} must be finite, got {shown(value)}"
+                )
         ratio = c.static_to_coulomb_ratio
         if not (_is_number(ratio) and math.isfinite(ratio) and ratio >= 1):
             raise ParameterFileError(
                 f"{where}: friction.static_to_coulomb_ratio [-] must be >= 1 (F_s >= F_c), "
-                f"got {ratio!r}"
+                f"got {shown(ratio)}"
             )
         for key, name in _TIMING.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
                 raise ParameterFileError(
                     f"{where}: timing.{key} must be a whole number of samples in 0..100, "
-                    f"got {value!r}"
+                    f"got {shown(value)}"
                 )
         try:
             self.model.parameter_vector(self.parameters.values)
@@ -192,7 +197,7 @@ def _section(doc: Mapping, name: str, keys: dict[str, str], where: str) -> dict[
     for key in raw:
         if key not in keys:
             raise ParameterFileError(
-                f"{where}: unknown key {name}.{key!s}{suggest(str(key), list(keys))}"
+                f"{where}: unknown key {name}.{shown(key)}{suggest(str(key), list(keys))}"
             )
     missing = [key for key in keys if key not in raw]
     if missing:
@@ -233,18 +238,18 @@ def plant_from_document(
     check_header(doc, tuple(_HEADER), tuple(_OPTIONAL), where)
     if str(doc["format_version"]).split(".")[0] != FORMAT_VERSION.split(".")[0]:
         raise ParameterFileError(
-            f"{where}: unknown format_version {doc['format_version']!r}; this hframe-id reads "
+            f"{where}: unknown format_version {shown(doc['format_version'])}; this hframe-id reads "
             f"{FORMAT_VERSION.split('.')[0]}.x plant files"
         )
     if doc["kind"] != KIND:
-        raise ParameterFileError(f"{where}: kind must be {KIND!r}, got {doc['kind']!r}")
+        raise ParameterFileError(f"{where}: kind must be {KIND!r}, got {shown(doc['kind'])}")
     seed = doc.get("seed")
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-        raise ParameterFileError(f"{where}: seed must be an integer or null, got {seed!r}")
+        raise ParameterFileError(f"{where}: seed must be an integer or null, got {shown(seed)}")
     stiffness = doc.get("position_dependent_stiffness", False)
     if not isinstance(stiffness, bool):
         raise ParameterFileError(
-            f"{where}: position_dependent_stiffness must be true or false, got {stiffness!r}"
+            f"{where}: position_dependent_stiffness must be true or false, got {shown(stiffness)}"
         )
     friction = _section(doc, "friction", _FRICTION, where)
     amplifier = _section(doc, "amplifier", _AMPLIFIER, where)
@@ -268,15 +273,12 @@ def load_plant_file(path: str | os.PathLike) -> Plant:
     """Load and validate a plant file (``ParameterFileError`` naming the file and field)."""
     path = Path(path)
     try:
-        text = read_text(path, "plant file")
+        text = read_text(path, "plant file", ParameterFileError)
     except FileNotFoundError:
         raise ParameterFileError(f"{path}: no such plant file") from None
     except OSError as err:
         raise ParameterFileError(f"{path}: cannot read ({err.strerror})") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ParameterFileError(f"{path}: not valid YAML ({str(err).splitlines()[0]})") from None
+    doc = load_yaml(text, str(path), ParameterFileError)
     return plant_from_document(doc, str(path), path.parent, path)
 
 
@@ -324,9 +326,10 @@ def recording_plant(path: str | os.PathLike) -> Plant | None:
     attachment = log.attachments.get(PLANT_FILE_ATTACHMENT)
     if attachment is None:
         return None
-    try:
-        doc = yaml.safe_load(attachment.data.decode())
-    except (UnicodeDecodeError, yaml.YAMLError) as err:
-        raise ParameterFileError(f"{path}[{PLANT_FILE_ATTACHMENT}]: unreadable ({err})") from None
     where = f"{path}[{PLANT_FILE_ATTACHMENT}]"
+    try:
+        text = attachment.data.decode()
+    except UnicodeDecodeError as err:
+        raise ParameterFileError(f"{where}: unreadable ({err})") from None
+    doc = load_yaml(text, where, ParameterFileError)
     return plant_from_document(doc, where, path=Path(where))

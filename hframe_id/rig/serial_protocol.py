@@ -14,6 +14,9 @@ import struct
 from dataclasses import dataclass
 from typing import Any
 
+from hframe_id.documents import load_json
+from hframe_id.errors import RigFault
+
 PROTOCOL_VERSION = 1
 SYNC = b"\xa5\x5a"
 HEAD = struct.Struct("<2sBH")
@@ -119,6 +122,7 @@ def encode_info(info: dict[str, Any]) -> bytes:
     return encode(INFO, json.dumps(info, separators=(",", ":")).encode())
 
 
-def decode_info(payload: bytes) -> dict[str, Any]:
-    """The JSON record of an INFO frame's payload."""
-    return json.loads(payload.decode())
+def decode_info(payload: bytes, where: str = "INFO frame") -> dict[str, Any]:
+    """The JSON record of an INFO frame's payload (``RigFault`` naming ``where`` if it is not
+    JSON, or beyond the limits of ``hframe_id.documents``)."""
+    return load_json(payload, where, RigFault)

@@ -99,7 +99,7 @@ class SerialRig(Rig):
             self._send(sp.HELLO)
             for frame_type, payload in self._receive(0.2):
                 if frame_type == sp.INFO:
-                    return self._rig_info(sp.decode_info(payload))
+                    return self._rig_info(sp.decode_info(payload, f"{self.port}: INFO frame"))
         raise RigFault(f"{self.port}: no answer to HELLO within {timeout_s} s (is it the rig?)")
 
     def _rig_info(self, info: dict) -> RigInfo:

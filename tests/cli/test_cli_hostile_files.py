@@ -1,0 +1,203 @@
+"""Hostile files (issue 27, item 2): YAML and JSON are read with limits (depth, size, alias
+expansion), a key given twice is refused, integers beyond int64 in a sample are refused, and
+an error line shows a bounded part of any value. Each is one ``hframe-id: error:`` line naming
+the file (and the field or line), exit status 2, no traceback, nothing written."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from hframe_id.cli import main
+from hframe_id.documents import MAX_ALIAS_NODES, MAX_DEPTH
+from hframe_id.errors import MAX_SHOWN
+
+ROOT = Path(__file__).resolve().parents[2]
+H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
+REC = ROOT / "datasets" / "4V_xmotion.mcap"
+SAMPLE_TOPIC = "/rig/sample"
+
+
+def _refused(argv: list, capsys, *named: str) -> str:
+    """Run ``argv``: exit status 2, exactly one short error line naming each of ``named``, no
+    traceback; the line."""
+    code = main([str(word) for word in argv])
+    err = capsys.readouterr().err
+    assert code == 2, err[:2000]
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), err[:2000]
+    assert len(lines[0]) < 400, lines[0][:2000]
+    for word in named:
+        assert str(word) in lines[0], lines[0]
+    return lines[0]
+
+
+def _parameter_file(path: Path, edit: Callable[[str], str]) -> Path:
+    path.write_text(edit(H8.read_text()))
+    return path
+
+
+def _recording(path: Path, payload: Callable[[int, dict], bytes | dict]) -> Path:
+    """4V_xmotion.mcap with each sample message ``i`` replaced by ``payload(i, message)``
+    (bytes as they are, a dict as JSON)."""
+    with REC.open("rb") as source, path.open("wb") as out:
+        reader = make_reader(source)
+        summary = reader.get_summary()
+        writer = Writer(out)
+        writer.start()
+        schemas = {
+            i: writer.register_schema(s.name, s.encoding, s.data)
+            for i, s in summary.schemas.items()
+        }
+        channels = {
+            i: writer.register_channel(
+                c.topic, c.message_encoding, schemas.get(c.schema_id, 0), c.metadata
+            )
+            for i, c in summary.channels.items()
+        }
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        for attachment in reader.iter_attachments():
+            writer.add_attachment(
+                attachment.log_time,
+                attachment.create_time,
+                attachment.name,
+                attachment.media_type,
+                attachment.data,
+            )
+        k = 0
+        for _, channel, message in reader.iter_messages():
+            data = message.data
+            if channel.topic == SAMPLE_TOPIC:
+                new = payload(k, json.loads(data))
+                data = new if isinstance(new, bytes) else json.dumps(new).encode()
+                k += 1
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time)
+        writer.finish()
+    return path
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch) -> Path:
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _listing(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")}
+
+
+# -- YAML: parameter, plant and manifest files --------------------------------------------------
+
+
+def test_deeply_nested_yaml(work, capsys):
+    path = work / "deep.yaml"
+    path.write_text("notes: " + "[" * 100_000 + "]" * 100_000 + "\n")
+    _refused(["params", "check", path], capsys, path, f"nested deeper than {MAX_DEPTH} levels")
+
+
+def test_nesting_up_to_the_limit_is_read(work, capsys):
+    nested = "[" * (MAX_DEPTH - 2) + "]" * (MAX_DEPTH - 2)
+    path = _parameter_file(work / "ok.yaml", lambda t: f"provenance: {{x: {nested}}}\n{t}")
+    assert main(["params", "check", str(path)]) == 0
+
+
+def test_yaml_alias_bomb_is_refused_in_one_short_line(work, capsys):
+    """3 kB that would expand to 9^8 strings ("billion laughs"): refused while composing,
+    before any consumer expands it."""
+    anchors = ['  - &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for prev, name in zip("abcdefg", "bcdefgh", strict=True):
+        anchors.append(f"  - &{name} [" + ", ".join([f"*{prev}"] * 9) + "]")
+    bomb = "provenance:\n  x:\n" + "\n".join(anchors) + "\n"
+    path = _parameter_file(
+        work / "bomb.yaml",
+        lambda t: bomb + t.replace("format_version: '1.0'", "format_version: *h"),
+    )
+    assert path.stat().st_size < 3000
+    _refused(["params", "check", path], capsys, path, f"more than {MAX_ALIAS_NODES:,} values")
+
+
+def test_a_few_aliases_are_fine(work, capsys):
+    path = _parameter_file(work / "alias.yaml", lambda t: "provenance: {a: &s [1, 2], b: *s}\n" + t)
+    assert main(["params", "check", str(path)]) == 0
+
+
+@pytest.mark.parametrize(
+    ("edit", "key", "lines"),
+    [
+        (lambda t: t.replace("title:", "title: first\ntitle:", 1), "'title'", "(lines 3 and 4)"),
+        (
+            lambda t: t.replace("  k_l [N/m]: 13167.0", "  k_l [N/m]: 13167.0\n  k_l [N/m]: 1.0"),
+            "'k_l [N/m]'",
+            "given twice",
+        ),
+    ],
+    ids=["header", "parameter"],
+)
+def test_a_key_given_twice_in_yaml(work, capsys, edit, key, lines):
+    path = _parameter_file(work / "twice.yaml", edit)
+    _refused(["params", "show", path], capsys, path, key, lines)
+
+
+def test_a_key_given_twice_in_a_manifest(work, capsys):
+    manifest = work / "manifest.yaml"
+    manifest.write_text("format_version: '1.0'\nfits: []\nfits: []\n")
+    before = _listing(work)
+    argv = ["batch", manifest, "--results", "r.parquet", "--workers", "1"]
+    _refused(argv, capsys, manifest, "'fits' given twice")
+    assert _listing(work) == before
+
+
+def test_a_huge_value_is_echoed_shortened(work, capsys):
+    huge = "9" * 100_000
+    path = _parameter_file(
+        work / "huge.yaml", lambda t: t.replace("k_l [N/m]: 13167.0", f"k_l [N/m]: '{huge}'")
+    )
+    line = _refused(["params", "check", path], capsys, path, "k_l [N/m] must be a number")
+    assert "..." in line and len(line) < len(str(path)) + 100 + MAX_SHOWN
+
+
+def test_deeply_nested_plant_file(work, capsys):
+    path = work / "plant.yaml"
+    path.write_text("friction: " + "{a: " * 5_000 + "1" + "}" * 5_000 + "\n")
+    argv = ["simulate", "--plant", path, "--step", "1,4", "--duration", "0.1", "--out", "s.csv"]
+    _refused(argv, capsys, path, "nested deeper")
+    assert _listing(work) == {"plant.yaml"}
+
+
+# -- JSON: the messages of a recording ----------------------------------------------------------
+
+
+def test_deeply_nested_json_sample(work, capsys):
+    deep = b"[" * 100_000 + b"]" * 100_000
+    path = _recording(work / "deep.mcap", lambda i, m: deep if i == 5 else m)
+    _refused(["inspect", path], capsys, path, "/rig/sample message 5", "nested deeper")
+
+
+def test_a_key_given_twice_in_a_json_sample(work, capsys):
+    def twice(i: int, message: dict) -> bytes | dict:
+        if i != 3:
+            return message
+        return json.dumps(message)[:-1].encode() + b', "u1_V": 7.0}'
+
+    path = _recording(work / "twice.mcap", twice)
+    _refused(["inspect", path], capsys, path, "/rig/sample message 3", "'u1_V' given twice")
+
+
+@pytest.mark.parametrize("field", ["sequence", "device_time_us"])
+@pytest.mark.parametrize("offset", [2**63, 2**64, 10**30])
+def test_sample_integers_beyond_int64(work, capsys, field, offset):
+    path = _recording(work / "big.mcap", lambda i, m: {**m, field: m[field] + offset})
+    _refused(["inspect", path], capsys, path, f"sample 0: {field}", str(offset))
+
+
+def test_a_number_beyond_any_float(work, capsys):
+    path = _recording(work / "big.mcap", lambda i, m: {**m, "u1_V": 10**400} if i == 2 else m)
+    line = _refused(["inspect", path], capsys, path, "sample 2: u1_V must be a number")
+    assert "..." in line
