@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from hframe_id.cli.outputs import check_dir, check_file
 from hframe_id.errors import OptionError
 
 
@@ -70,9 +71,13 @@ def run(args: argparse.Namespace) -> int:
     results = Path(args.results)
     if results.suffix != ".parquet":
         raise OptionError(f"--results {results}: expected a .parquet file")
+    # The store grows run after run, so an existing one is no error (force=True); --force
+    # here means redoing stored fits.
+    check_file(results, "--results", force=True, make_parents=True)
+    out_dir = Path(args.out_dir) if args.out_dir else results.with_name(f"{results.stem}-fits")
+    check_dir(out_dir, "--out-dir")
     jobs = load_manifest(args.manifest)
     store = ResultsStore(results)
-    out_dir = Path(args.out_dir) if args.out_dir else results.with_name(f"{results.stem}-fits")
 
     def progress(row: dict, done: int, total: int) -> None:
         if not args.quiet:

@@ -13,7 +13,13 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hframe_id.cli.outputs import check_dir, check_file, check_length
+from hframe_id.cli.outputs import (
+    add_force_option,
+    check_dir,
+    check_file,
+    check_length,
+    written_together,
+)
 from hframe_id.control.trajectory import (
     SQUARE_F_A,
     SQUARE_SIDE_M,
@@ -91,6 +97,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")
     out.add_argument("--plot", type=Path, metavar="DIR", help="write the four figures here")
     out.add_argument("--csv", type=Path, help="write the closed-loop signals to this CSV file")
+    add_force_option(out)
     parser.set_defaults(handler=run)
 
 
@@ -146,9 +153,11 @@ def _controller(args: argparse.Namespace) -> ControllerOptions:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     if args.csv is not None:
-        check_file(args.csv, "--csv")
+        check_file(args.csv, "--csv", args.force)
     if args.plot is not None:
-        check_dir(args.plot, "--plot")
+        from hframe_id.control.plots import FIGURES
+
+        check_dir(args.plot, "--plot", files=FIGURES.values(), force=args.force)
 
 
 def _signals(result) -> pd.DataFrame:
@@ -171,7 +180,8 @@ def _signals(result) -> pd.DataFrame:
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id control``: simulate the PID loops on the path and print the per-leg metrics.
 
-    Checks every option before simulating; writes ``--csv`` and ``--plot`` only after the run.
+    Checks every option and output before simulating; writes ``--csv`` and ``--plot`` after
+    the run, together.
     """
     import numpy as np
 
@@ -205,13 +215,14 @@ def run(args: argparse.Namespace) -> int:
     if not np.isfinite(result.states).all():
         raise OptionError("the simulation diverged (non-finite states); try more --substeps")
     metrics = leg_metrics(result.time_s, result.xy_m, trajectory)
-    if args.csv is not None:
-        _signals(result).to_csv(args.csv, index=False)
     written = []
-    if args.plot is not None:
-        from hframe_id.control.plots import write_control_plots
+    with written_together() as staging:
+        if args.csv is not None:
+            _signals(result).to_csv(staging.file(args.csv), index=False)
+        if args.plot is not None:
+            from hframe_id.control.plots import write_control_plots
 
-        written = list(write_control_plots(result, args.plot).values())
+            written = list(write_control_plots(result, args.plot, staging).values())
     if args.json:
         print(
             json.dumps(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hframe_id.cli.outputs import check_file
+from hframe_id.cli.outputs import add_force_option, check_file
 from hframe_id.errors import OptionError
 
 
@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--out", metavar="PATH", help="write here (default: standard output; needed for matlab)"
     )
-    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    add_force_option(parser)
     parser.set_defaults(handler=run)
 
 
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     if fmt.binary and not args.out:
         raise OptionError(f"format {fmt.name} writes a binary {fmt.suffix} file: give --out PATH")
     if args.out:
-        check_file(args.out, "--out")
+        check_file(args.out, "--out", args.force)
     data = render(load_parameter_file(args.file), fmt)
     if args.out:
         path = write_atomic(args.out, data, overwrite=args.force)

@@ -8,7 +8,12 @@ import json
 import sys
 from pathlib import Path
 
+from hframe_id.cli.outputs import add_force_option, check_dir, written_together
 from hframe_id.errors import OptionError
+
+#: What ``fleet report`` writes into its folder: the page, and the plots (replaced as a whole).
+REPORT_PAGE = "fleet-report.md"
+REPORT_PLOTS = "plots"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -62,6 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="plots and fleet-report.md go here (default: <results stem>-report/)",
     )
+    add_force_option(report)
     report.add_argument(
         "--json",
         action="store_true",
@@ -79,9 +85,12 @@ def run_make(args: argparse.Namespace) -> int:
     def progress(rig: str, week: int) -> None:
         print(f"{rig} week {week}: recorded", file=sys.stderr, flush=True)
 
-    manifest = make_fleet(args.rigs, args.weeks, args.seed, args.out, progress, args.plant)
-    print(f"manifest: {manifest}")
-    print(f"aging: {manifest.with_name('aging.yaml')}")
+    out = check_dir(args.out, "--out", empty=True)
+    with written_together() as staging:
+        folder = staging.folder(out)
+        manifest = make_fleet(args.rigs, args.weeks, args.seed, folder, progress, args.plant)
+    print(f"manifest: {out / manifest.name}")
+    print(f"aging: {out / 'aging.yaml'}")
     return 0
 
 
@@ -104,13 +113,14 @@ def run_report(args: argparse.Namespace) -> int:
     results = Path(args.results)
     if not results.is_file():
         raise OptionError(f"{results}: no such results file")
-    frame = read_results(results)
     out = Path(args.out) if args.out else results.with_name(f"{results.stem}-report")
-    out.mkdir(parents=True, exist_ok=True)
+    check_dir(out, "--out", files=(REPORT_PAGE,), folders=(REPORT_PLOTS,), force=args.force)
+    frame = read_results(results)
     drifts = drift_table(frame, threshold)
-    plots = plot_histories(frame, threshold, out / "plots")
-    report = summary(frame, drifts, threshold, results, out / "plots")
-    page = write_markdown(report, drifts, out / "fleet-report.md")
+    report = summary(frame, drifts, threshold, results, out / REPORT_PLOTS)
+    with written_together() as staging:
+        plots = plot_histories(frame, threshold, out / REPORT_PLOTS, staging)
+        page = write_markdown(report, drifts, plots, out / REPORT_PAGE, staging)
     if args.json:
         print(json.dumps(report, indent=2))
         return 0

@@ -6,7 +6,7 @@ import argparse
 import datetime as dt
 import sys
 
-from hframe_id.cli.outputs import check_file
+from hframe_id.cli.outputs import add_force_option, check_file
 from hframe_id.errors import OptionError
 from hframe_id.recordings.import_spec import ROLES, ColumnMap, ImportSpec
 from hframe_id.recordings.units import KNOWN_UNITS
@@ -48,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f"SOURCE); repeat for each column. Units: {', '.join(KNOWN_UNITS)}",
     )
     parser.add_argument("--out", required=True, metavar="PATH", help="the recording (.mcap)")
-    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    add_force_option(parser)
     parser.add_argument(
         "--variant", required=True, help="model variant of the rig (letters, digits, '-', '_')"
     )
@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except OptionError as err:
         raise OptionError(f"{args.file}: {err}") from None
-    check_file(args.out, "--out", make_parents=True)
+    check_file(args.out, "--out", args.force, make_parents=True)
     result = import_recording(args.file, args.out, spec, overwrite=args.force)
     channels = result.channels
     print(

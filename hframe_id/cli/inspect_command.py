@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_file
+from hframe_id.cli.outputs import add_force_option, check_file, written_together
 
 if TYPE_CHECKING:  # the reader (NumPy, MCAP) is imported when a file is inspected
     from hframe_id.recordings.recording import Recording
@@ -41,6 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="PNG",
         help="draw inputs, outputs and signals to a PNG (default: the recording's name with .png)",
     )
+    add_force_option(parser)
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
     )
@@ -51,6 +52,10 @@ def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id inspect``: the recording's summary as text or JSON, plotted if asked."""
     from hframe_id.recordings.reader import read_log, read_recording
 
+    target = None
+    if args.plot is not None:
+        target = args.recording.with_suffix(".png") if args.plot is True else Path(args.plot)
+        check_file(target, "--plot", args.force, make_parents=True)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         recording = read_recording(args.recording)
@@ -58,10 +63,9 @@ def run(args: argparse.Namespace) -> int:
     summary = summarize(recording, log)
     summary["warnings"] = [" ".join(str(w.message).split()) for w in caught]
     summary["plot"] = None
-    if args.plot is not None:
-        target = args.recording.with_suffix(".png") if args.plot is True else Path(args.plot)
-        check_file(target, "--plot", make_parents=True)
-        plot(recording, target)
+    if target is not None:
+        with written_together() as staging:
+            plot(recording, staging.file(target))
         summary["plot"] = str(target)
     if args.json:
         emit("inspect", summary)
@@ -293,5 +297,4 @@ def plot(recording: Recording, target: Path) -> None:
     axes[-1].set_xlabel("time [s]")
     figure.suptitle(recording.name())
     figure.tight_layout()
-    target.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(target, dpi=100)

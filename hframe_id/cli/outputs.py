@@ -1,19 +1,41 @@
-"""Output paths and run lengths checked before any work is done.
+"""The output guard: every file and folder a command writes, checked before any work is done,
+then written together.
 
 A command that cannot write its result says so at once, as one line with exit status 2,
-instead of failing after seconds or minutes of computing, and writes nothing. Writability is
-probed by creating (and at once removing) a temporary file where the output would go: the
-permission bits say little when running as root or on special file systems such as /proc.
+instead of failing after seconds or minutes of computing, and writes nothing. The guard
+checks, for each output: that it is of the right kind (a file where a file goes, a folder
+where a folder goes), that it does not exist unless ``--force`` is given, that its folder
+exists (or can be made) and that new files can be created there. Writability is probed by
+creating (and at once removing) a temporary file where the output would go: the permission
+bits say little when running as root or on special file systems such as /proc.
+
+The outputs are then written through ``written_together``: each under a hidden temporary name
+beside its target, all put in place when the command's work is done, none on any failure.
 A run longer than ``MAX_SAMPLES`` is refused the same way, before its tables are allocated.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import tempfile
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
+from hframe_id.atomic import Staging
 from hframe_id.errors import OptionError
+
+
+def add_force_option(parser: argparse.ArgumentParser, *aliases: str) -> None:
+    """``--force`` (and ``aliases``, kept for old scripts): replace existing outputs."""
+    parser.add_argument(
+        "--force",
+        *aliases,
+        dest="force",
+        action="store_true",
+        help="replace output files that exist already (default: refuse, before any work)",
+    )
 
 
 def _probe(directory: Path, option: str, target: Path) -> None:
@@ -27,38 +49,83 @@ def _probe(directory: Path, option: str, target: Path) -> None:
         ) from None
 
 
-def check_file(path: str | os.PathLike, option: str, make_parents: bool = False) -> Path:
-    """Check that the file ``path`` (given with ``option``) can be written: not a folder, its
-    folder exists (or, with ``make_parents``, its nearest existing ancestor is a folder) and
-    accepts new files. Existing files are the command's business (``--overwrite``)."""
-    path = Path(path)
-    if path.is_dir():
-        raise OptionError(f"{option} {path}: is a directory; give a file name")
-    folder = path.parent
-    if make_parents:
-        while not folder.exists() and folder != folder.parent:
-            folder = folder.parent
-    if not folder.exists():
-        raise OptionError(f"{option} {path}: folder {folder} does not exist")
+def _nearest_folder(path: Path, option: str, target: Path) -> Path:
+    """The nearest existing ancestor of ``path``, which must be a folder."""
+    folder = path
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
     if not folder.is_dir():
-        raise OptionError(f"{option} {path}: {folder} is not a directory")
-    _probe(folder, option, path)
-    return path
+        raise OptionError(f"{option} {target}: {folder} is not a directory")
+    return folder
 
 
-def check_dir(path: str | os.PathLike, option: str) -> Path:
-    """Check that the folder ``path`` (given with ``option``) exists or can be created, and
-    accepts new files; creates nothing."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
+def _check_target(path: Path, option: str, force: bool, folder: bool) -> None:
+    """``path`` is of the kind it will be written as, and new unless ``force``."""
+    if folder and path.exists() and not path.is_dir():
         raise OptionError(f"{option} {path}: exists and is not a directory")
-    ancestor = path
-    while not ancestor.exists() and ancestor != ancestor.parent:
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise OptionError(f"{option} {path}: {ancestor} is not a directory")
-    _probe(ancestor, option, path)
+    if not folder and path.is_dir():
+        raise OptionError(f"{option} {path}: is a directory, not a file")
+    if (path.exists() or path.is_symlink()) and not force:
+        raise OptionError(f"{option} {path}: exists already; pass --force to replace it")
+
+
+def check_file(
+    path: str | os.PathLike, option: str, force: bool = False, make_parents: bool = False
+) -> Path:
+    """Check that the file ``path`` (given with ``option``) can be written: not a folder, new
+    unless ``force``, its folder exists (or, with ``make_parents``, its nearest existing
+    ancestor is a folder) and accepts new files."""
+    path = Path(path)
+    _check_target(path, option, force, folder=False)
+    if not make_parents and not path.parent.exists():
+        raise OptionError(f"{option} {path}: folder {path.parent} does not exist")
+    _probe(_nearest_folder(path.parent, option, path), option, path)
     return path
+
+
+def check_dir(
+    path: str | os.PathLike,
+    option: str,
+    files: Iterable[str] = (),
+    folders: Iterable[str] = (),
+    force: bool = False,
+    empty: bool = False,
+) -> Path:
+    """Check that the folder ``path`` (given with ``option``) exists or can be created and
+    accepts new files, and that the ``files`` and ``folders`` the command writes into it
+    (names relative to it; a folder is replaced as a whole) are of that kind and new unless
+    ``force``. With ``empty`` the folder is the output, filled as a whole: it must not exist
+    or be empty. Creates nothing."""
+    path = Path(path)
+    _check_target(path, option, force=True, folder=True)
+    if empty and path.is_dir() and any(path.iterdir()):
+        raise OptionError(f"{option} {path}: exists and is not empty")
+    for name in files:
+        _check_target(path / name, option, force, folder=False)
+    for name in folders:
+        _check_target(path / name, option, force, folder=True)
+    _probe(_nearest_folder(path, option, path), option, path)
+    return path
+
+
+@contextmanager
+def written_together() -> Iterator[Staging]:
+    """A ``Staging`` for the outputs written in the block: put in place together when the
+    block ends normally, removed on any exception. An ``OSError`` while writing or placing
+    them (a full disk, a folder changed meanwhile) is an ``OptionError`` naming the output."""
+    staging = Staging()
+    try:
+        yield staging
+        staging.commit()
+    except OSError as err:
+        where = staging.target_of(Path(err.filename)) if err.filename else "the outputs"
+        staging.discard()
+        raise OptionError(
+            f"cannot write {where} ({err.strerror or err}); nothing written"
+        ) from None
+    except BaseException:
+        staging.discard()
+        raise
 
 
 #: Samples one simulated or recorded run may have: 10 million is 2.8 h at 1 kHz and keeps the

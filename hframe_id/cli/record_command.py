@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_file, check_length
+from hframe_id.cli.outputs import add_force_option, check_file, check_length
 from hframe_id.errors import OptionError
 
 
@@ -90,7 +90,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     out = parser.add_argument_group("output")
     out.add_argument("--out", type=Path, required=True, help="recording to write (.mcap)")
-    out.add_argument("--overwrite", action="store_true", help="replace an existing recording")
+    add_force_option(out, "--overwrite")
     out.add_argument("--operator", help="who runs the experiment (default: login name)")
     out.add_argument("--notes", default="", help="free text for the experiment metadata")
     out.add_argument("--quiet", action="store_true", help="no progress display")
@@ -236,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
 
     Exit status 0 if the run completed, 1 if it was aborted (the recording is kept).
     """
-    check_file(args.out, "--out", make_parents=True)
+    check_file(args.out, "--out", args.force, make_parents=True)
     from hframe_id.recordings.log_format import PROTOCOL_ATTACHMENT
     from hframe_id.recordings.writer import Attachment
     from hframe_id.rig.logger import RunOptions, run_experiment
@@ -267,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
             RunOptions(
                 out=args.out,
                 operator=args.operator,
-                overwrite=args.overwrite,
+                overwrite=args.force,
                 progress=show,
                 notes=args.notes,
             ),

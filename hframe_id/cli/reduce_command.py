@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hframe_id.cli.outputs import check_file
+from hframe_id.cli.outputs import add_force_option, check_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("file", metavar="FILE", help="hframe-20 parameter file (YAML)")
     parser.add_argument("--out", required=True, metavar="FILE", help="hframe-8 file to write")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    add_force_option(parser)
     parser.set_defaults(handler=run)
 
 
@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.parameters import load_parameter_file, save_parameter_file
     from hframe_id.parameters.reduce import reduce_to_hframe8
 
-    check_file(args.out, "--out", make_parents=True)
+    check_file(args.out, "--out", args.force, make_parents=True)
     reduced = reduce_to_hframe8(load_parameter_file(args.file))
     path = save_parameter_file(reduced, args.out, overwrite=args.force)
     print(f"wrote {path} ({reduced.variant}, reduced from {args.file})")

@@ -11,7 +11,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from hframe_id.cli.outputs import check_dir
+from hframe_id.cli.outputs import add_force_option, check_dir, written_together
 
 DEFAULT_PARAMS = Path("models/hframe-8-table4.2.yaml")
 
@@ -25,6 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "compare with Tables 5.1, 5.3, 5.4, 5.5 and 5.6 (report.md and plots/ in --out).",
     )
     parser.add_argument("--out", type=Path, required=True, help="report directory")
+    add_force_option(parser)
     parser.add_argument(
         "--params",
         type=Path,
@@ -40,16 +41,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id reproduce``: write the report and print each gain set against the thesis."""
     from hframe_id.control.closed_loop import check_hframe
-    from hframe_id.control.reproduction import reproduce, write_report
+    from hframe_id.control.reproduction import report_files, reproduce, write_report
     from hframe_id.models import build_model
     from hframe_id.parameters import load_parameter_file
 
     params = load_parameter_file(args.params)
     check_hframe(build_model(params.variant))
-    check_dir(args.out, "--out")
+    check_dir(args.out, "--out", files=report_files(), force=args.force)
     rep = reproduce(params, sensitivity=not args.no_sensitivity)
     command = "hframe-id " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else ""
-    report = write_report(rep, args.out, command)
+    with written_together() as staging:
+        report = write_report(rep, args.out, staging, command)
     ok = rep.within_tolerance()
     print(f"wrote {report}")
     for label, flag in ok.items():

@@ -4,7 +4,8 @@ Inputs: steps / pulses per motor (``--step``), a voltage sequence from CSV (``--
 recorder's format) or the commanded voltages of a recording (``--recording``), zero-order held
 at the sample time. Outputs: every state, input and output as CSV (exact model signals), and on
 request an MCAP recording of the same inputs made by the sim rig (sensor models, log format of
-docs/log-format.md) and a plot. Everything is checked and simulated before anything is written.
+docs/log-format.md) and a plot. The outputs are checked before the simulation and put in place
+together after it (none if any of them fails).
 """
 
 from __future__ import annotations
@@ -15,7 +16,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_dir, check_file, check_length
+from hframe_id.cli.outputs import (
+    add_force_option,
+    check_dir,
+    check_file,
+    check_length,
+    written_together,
+)
 from hframe_id.errors import OptionError
 
 if TYPE_CHECKING:  # imported when a simulation runs, not for --help
@@ -84,7 +91,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="--mcap: sensor noise seed (0)")
     parser.add_argument("--plot", type=Path, metavar="DIR", help="write open_loop.png here")
-    parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    add_force_option(parser, "--overwrite")
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
     )
@@ -159,21 +166,23 @@ def _frame(result: SimulationResult) -> pd.DataFrame:
     return pd.DataFrame(data)
 
 
+#: The file ``--plot DIR`` gets.
+PLOT_FILE = "open_loop.png"
+
+
 def _check_writable(args: argparse.Namespace) -> None:
-    for option, path in (("--out", args.out), ("--mcap", args.mcap)):
-        if path is None:
-            continue
-        if path.exists() and not args.overwrite:
-            raise OptionError(f"{path} exists; pass --overwrite to replace it")
-        check_file(path, option)
     if args.mcap is not None and args.mcap.suffix != ".mcap":
         raise OptionError(f"--mcap needs a .mcap file name, got {args.mcap}")
+    for option, path in (("--out", args.out), ("--mcap", args.mcap)):
+        if path is not None:
+            check_file(path, option, args.force)
     if args.plot is not None:
-        check_dir(args.plot, "--plot")
+        check_dir(args.plot, "--plot", files=(PLOT_FILE,), force=args.force)
 
 
-def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source: str):
-    """Record the inputs with the sim rig to --mcap; the logger's ``RunSummary``."""
+def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source: str, out: Path):
+    """Record the inputs with the sim rig to ``out`` (--mcap's staged file, replaced); the
+    logger's ``RunSummary``."""
     from hframe_id.rig.logger import RunOptions, run_experiment
     from hframe_id.rig.protocols import SequenceProtocol
     from hframe_id.rig.sim import SimRig
@@ -187,8 +196,8 @@ def _record(args, params, table: np.ndarray, dt: float, n_substeps: int, source:
             rig,
             protocol,
             RunOptions(
-                out=args.mcap,
-                overwrite=args.overwrite,
+                out=out,
+                overwrite=True,
                 reproducible=True,
                 handle_signals=False,
                 notes=f"hframe-id simulate: {source}",
@@ -255,7 +264,6 @@ def run(args: argparse.Namespace) -> int:
     result, n = _simulate(args, plant, model, table, dt)
     if not np.isfinite(result.states).all():
         raise OptionError("the simulation diverged (non-finite states); try more --substeps")
-    _frame(result).to_csv(args.out, index=False)
     law = "plant's" if args.plant else f"{args.friction or 'smooth'}"
     report = {
         "csv": args.out,
@@ -282,25 +290,28 @@ def run(args: argparse.Namespace) -> int:
         f"wrote {args.out} ({table.shape[0]} samples of {dt * 1e3:g} ms, {model.variant}, "
         f"{law} friction, {source})"
     ]
-    if args.mcap is not None:
-        summary = _record(args, plant, table, dt, n, source)
-        state = f"aborted: {summary.abort_reason}" if summary.aborted else "complete"
-        report["mcap"] = {
-            "file": args.mcap,
-            "samples": summary.samples,
-            "seed": args.seed,
-            "aborted": summary.aborted,
-            "abort_reason": summary.abort_reason or None,
-        }
-        lines.append(
-            f"wrote {args.mcap} ({summary.samples} samples, sim rig, seed {args.seed}, {state})"
-        )
-    if args.plot is not None:
-        from hframe_id.simulation.plots import write_open_loop_plot
+    with written_together() as staging:
+        _frame(result).to_csv(staging.file(args.out), index=False)
+        if args.mcap is not None:
+            summary = _record(args, plant, table, dt, n, source, staging.file(args.mcap))
+            state = f"aborted: {summary.abort_reason}" if summary.aborted else "complete"
+            report["mcap"] = {
+                "file": args.mcap,
+                "samples": summary.samples,
+                "seed": args.seed,
+                "aborted": summary.aborted,
+                "abort_reason": summary.abort_reason or None,
+            }
+            lines.append(
+                f"wrote {args.mcap} ({summary.samples} samples, sim rig, seed {args.seed}, {state})"
+            )
+        if args.plot is not None:
+            from hframe_id.simulation.plots import write_open_loop_plot
 
-        title = f"{model.variant}: {source}"
-        report["plot"] = write_open_loop_plot(result, args.plot / "open_loop.png", title)
-        lines.append(f"wrote {report['plot']}")
+            title = f"{model.variant}: {source}"
+            write_open_loop_plot(result, staging.file(args.plot / PLOT_FILE), title)
+            report["plot"] = args.plot / PLOT_FILE
+            lines.append(f"wrote {report['plot']}")
     if args.json:
         emit("simulate", report)
     else:

@@ -9,8 +9,7 @@ import sys
 import warnings
 
 from hframe_id.cli.fit_command import resolve_dataset
-from hframe_id.cli.outputs import check_dir
-from hframe_id.errors import OptionError
+from hframe_id.cli.outputs import add_force_option, check_dir, written_together
 
 #: The defaults of ``ValidationOptions``, stated in --help without importing the validation
 #: (SciPy, CasADi); tests/cli/test_cli_help.py checks that they agree.
@@ -66,6 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f"(default {HELP_DEFAULTS['max_lag']})",
     )
     parser.add_argument("--plot", metavar="DIR", help="write compare and resid PNGs to DIR")
+    add_force_option(parser)
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.set_defaults(handler=run)
 
@@ -87,21 +87,23 @@ def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id validate``: fit [%] and residual tests as text or JSON, plots if asked."""
     from hframe_id.parameters import load_parameter_file
     from hframe_id.validation import ValidationOptions, validate
+    from hframe_id.validation.compare import labels_of
     from hframe_id.validation.output import to_document, to_text
-    from hframe_id.validation.plots import write_plots
+    from hframe_id.validation.plots import plot_names, write_plots
 
     given = {k: getattr(args, k) for k in HELP_DEFAULTS if getattr(args, k) is not None}
     options = ValidationOptions(**given)
     parameter_sets = [load_parameter_file(path) for path in [args.fit, *args.params]]
     recordings = _read(args.recordings)
-    plot_dir = check_dir(args.plot, "--plot") if args.plot else None
+    plot_dir = None
+    if args.plot:
+        names = plot_names([r.name() for r in recordings], labels_of(parameter_sets))
+        plot_dir = check_dir(args.plot, "--plot", files=names, force=args.force)
     result = validate(parameter_sets, recordings, options)
     written = []
     if plot_dir is not None:
-        try:
-            written = write_plots(result.recordings, plot_dir)
-        except OSError as err:
-            raise OptionError(f"--plot {plot_dir}: cannot write ({err.strerror})") from None
+        with written_together() as staging:
+            written = write_plots(result.recordings, plot_dir, staging)
     if args.json:
         print(json.dumps(to_document(result), indent=2, allow_nan=False))
     else:

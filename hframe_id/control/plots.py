@@ -10,6 +10,7 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from hframe_id.atomic import Staging
 from hframe_id.control.closed_loop import ClosedLoopResult
 from hframe_id.control.metrics import perpendicular_error
 
@@ -94,11 +95,10 @@ def integral_figure(result: ClosedLoopResult, title: str = "") -> Figure:
 
 
 def write_control_plots(
-    result: ClosedLoopResult, directory: Path, prefix: str = ""
+    result: ClosedLoopResult, directory: Path, staging: Staging, prefix: str = ""
 ) -> dict[str, Path]:
-    """Write the four figures into ``directory``; returns their paths by kind."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
+    """Stage the four figures as files of ``directory`` (``staging`` puts them in place);
+    returns their paths by kind."""
     builders = {
         "path": path_figure,
         "perpendicular": perpendicular_figure,
@@ -107,7 +107,7 @@ def write_control_plots(
     }
     written = {}
     for kind, build in builders.items():
-        path = directory / f"{prefix}{FIGURES[kind]}"
-        build(result).savefig(path, dpi=110)
+        path = Path(directory) / f"{prefix}{FIGURES[kind]}"
+        build(result).savefig(staging.file(path), dpi=110)
         written[kind] = path
     return written

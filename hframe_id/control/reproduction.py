@@ -19,10 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hframe_id.atomic import Staging
 from hframe_id.control.closed_loop import ClosedLoopResult, simulate_closed_loop
 from hframe_id.control.metrics import LegMetrics, leg_metrics
 from hframe_id.control.pid import ControllerOptions
-from hframe_id.control.plots import path_figure, write_control_plots
+from hframe_id.control.plots import FIGURES, path_figure, write_control_plots
 from hframe_id.control.trajectory import square
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
@@ -282,18 +283,33 @@ def _table_5_6(rep: Reproduction) -> list[str]:
     return [*lines, ""]
 
 
-def write_report(rep: Reproduction, out: Path, command: str = "") -> Path:
-    """Markdown report with plots in ``out``; returns the report's path."""
+#: The report's file and its plots: the baseline run's four views (Fig. 5.9-5.18, with this
+#: prefix) and each gain set's path.
+REPORT = "report.md"
+BASELINE_PREFIX = "pid_150_100_4_"
+
+
+def _path_plot(table: ThesisTable) -> str:
+    return "plots/" + table.label.lower().replace(" ", "_").replace("/", "_") + "_path.png"
+
+
+def report_files() -> tuple[str, ...]:
+    """What ``write_report`` writes, relative to its folder."""
+    baseline = (f"plots/{BASELINE_PREFIX}{name}" for name in FIGURES.values())
+    return (REPORT, *baseline, *(_path_plot(table) for table in THESIS_TABLES))
+
+
+def write_report(rep: Reproduction, out: Path, staging: Staging, command: str = "") -> Path:
+    """Stage the markdown report with its plots (``report_files``) in ``out``; ``staging``
+    puts them in place. Returns the report's path."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    plots = out / "plots"
     baseline = rep.rows[0]
-    written = write_control_plots(baseline.result, plots, prefix="pid_150_100_4_")
+    written = write_control_plots(baseline.result, out / "plots", staging, BASELINE_PREFIX)
     paths = {}
     for row in rep.rows:
-        name = row.thesis.label.lower().replace(" ", "_").replace("/", "_")
-        path = plots / f"{name}_path.png"
-        path_figure(row.result, f"End-effector path, {row.thesis.label}").savefig(path, dpi=110)
+        path = out / _path_plot(row.thesis)
+        figure = path_figure(row.result, f"End-effector path, {row.thesis.label}")
+        figure.savefig(staging.file(path), dpi=110)
         paths[row.thesis.label] = path
     ok = rep.within_tolerance()
     ours, theirs = rep.ranking(), rep.thesis_ranking()
@@ -370,9 +386,7 @@ def write_report(rep: Reproduction, out: Path, command: str = "") -> Path:
         "",
         *discussion(rep),
     ]
-    report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n")
-    return report
+    return staging.write(out / REPORT, "\n".join(lines) + "\n")
 
 
 def _span(values: list[float], scale: float = 1.0, fmt: str = "{:.0f}") -> str:

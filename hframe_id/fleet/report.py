@@ -8,58 +8,58 @@ no backend and no global state.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
-from hframe_id.atomic import replace_atomically, staged_directory
+from hframe_id.atomic import Staging
 from hframe_id.fleet.drift import Drift, parameters_of, successful
 
 JSON_FORMAT_VERSION = "1.0"
 
 
-def plot_histories(frame: pd.DataFrame, threshold: float, out: Path) -> list[Path]:
-    """One PNG per parameter in ``out`` (replaced as a whole): per rig, the estimate's change
-    against the rig's first successful run [%] over run time, with its 95 % interval as error
-    bars and the drift threshold as dashed lines."""
+def plot_histories(
+    frame: pd.DataFrame, threshold: float, out: Path, staging: Staging
+) -> list[Path]:
+    """One PNG per parameter in the folder ``out``, staged to replace it as a whole
+    (``staging`` puts it in place): per rig, the estimate's change against the rig's first
+    successful run [%] over run time, with its 95 % interval as error bars and the drift
+    threshold as dashed lines. Returns the PNGs' paths in ``out``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     ok = successful(frame)
+    folder = staging.folder(out)
     names = []
-    if out.exists():
-        shutil.rmtree(out)
-    with staged_directory(out) as staging:
-        for name, unit in parameters_of(ok):
-            value = f"{name} [{unit}]"
-            fig = Figure(figsize=(7, 3.5))
-            FigureCanvasAgg(fig)
-            ax = fig.subplots()
-            for rig, runs in ok[ok[value].notna()].groupby("rig", sort=True):
-                base = runs[value].iloc[0]
-                change = 100 * (runs[value] / base - 1)
-                low = 100 * (runs[f"{name} ci95 low [{unit}]"] / base - 1)
-                high = 100 * (runs[f"{name} ci95 high [{unit}]"] / base - 1)
-                ax.errorbar(
-                    runs["run_time"],
-                    change,
-                    yerr=[change - low, high - change],
-                    marker="o",
-                    capsize=3,
-                    label=str(rig),
-                )
-            for level in (-100 * threshold, 100 * threshold):
-                ax.axhline(level, color="0.5", linestyle="--", linewidth=0.8)
-            ax.set_title(f"{value}: change against each rig's first run")
-            ax.set_ylabel("change [%]")
-            ax.set_xlabel("run time [UTC]")
-            ax.legend(fontsize="small", ncol=2, loc="best")
-            fig.autofmt_xdate()
-            fig.tight_layout()
-            fig.savefig(staging / f"{name}.png", dpi=90)
-            names.append(f"{name}.png")
+    for name, unit in parameters_of(ok):
+        value = f"{name} [{unit}]"
+        fig = Figure(figsize=(7, 3.5))
+        FigureCanvasAgg(fig)
+        ax = fig.subplots()
+        for rig, runs in ok[ok[value].notna()].groupby("rig", sort=True):
+            base = runs[value].iloc[0]
+            change = 100 * (runs[value] / base - 1)
+            low = 100 * (runs[f"{name} ci95 low [{unit}]"] / base - 1)
+            high = 100 * (runs[f"{name} ci95 high [{unit}]"] / base - 1)
+            ax.errorbar(
+                runs["run_time"],
+                change,
+                yerr=[change - low, high - change],
+                marker="o",
+                capsize=3,
+                label=str(rig),
+            )
+        for level in (-100 * threshold, 100 * threshold):
+            ax.axhline(level, color="0.5", linestyle="--", linewidth=0.8)
+        ax.set_title(f"{value}: change against each rig's first run")
+        ax.set_ylabel("change [%]")
+        ax.set_xlabel("run time [UTC]")
+        ax.legend(fontsize="small", ncol=2, loc="best")
+        fig.autofmt_xdate()
+        fig.tight_layout()
+        fig.savefig(folder / f"{name}.png", dpi=90)
+        names.append(f"{name}.png")
     return [out / n for n in names]
 
 
@@ -117,8 +117,11 @@ def summary(
     }
 
 
-def write_markdown(report: dict[str, Any], drifts: list[Drift], path: Path) -> Path:
-    """A markdown page with the counts, the flags table and the plots (written atomically)."""
+def write_markdown(
+    report: dict[str, Any], drifts: list[Drift], plots: list[Path], path: Path, staging: Staging
+) -> Path:
+    """Stage a markdown page at ``path`` with the counts, the flags table and the ``plots``
+    (``staging`` puts it in place)."""
     rows = flags_table(drifts)
     lines = [
         "# Fleet report",
@@ -137,7 +140,6 @@ def write_markdown(report: dict[str, Any], drifts: list[Drift], path: Path) -> P
     else:
         lines.append("No drift flagged.")
     lines += ["", "## Histories", ""]
-    plots = Path(report["plots"])
-    for png in sorted(plots.glob("*.png")):
-        lines.append(f"![{png.stem}]({plots.name}/{png.name})")
-    return replace_atomically(path, "\n".join(lines) + "\n")
+    for png in sorted(plots):
+        lines.append(f"![{png.stem}]({png.parent.name}/{png.name})")
+    return staging.write(path, "\n".join(lines) + "\n")

@@ -76,9 +76,10 @@ FIRST_RUN = dt.datetime(2026, 1, 5, 8, 0, tzinfo=dt.UTC)
 def make_fleet(
     n_rigs: int, n_weeks: int, seed: int, out: str | Path, progress=None, plant: str = "sim"
 ) -> Path:
-    """Record the fleet into ``out`` (which must not exist or be empty); returns the
-    manifest's path. ``progress`` is called with (rig, week) after each weekly run.
-    ``plant``: ``"sim"`` (the fitted model's own plants) or ``"realistic"``."""
+    """Record the fleet into ``out`` (created if absent; ``hframe-id fleet make`` gives a new
+    folder, put in place when the fleet is complete); returns the manifest's path.
+    ``progress`` is called with (rig, week) after each weekly run. ``plant``: ``"sim"`` (the
+    fitted model's own plants) or ``"realistic"``."""
     if plant not in PLANTS:
         raise OptionError(f"--plant must be one of {', '.join(PLANTS)}, got {plant!r}")
     if n_rigs < 1:
@@ -86,8 +87,6 @@ def make_fleet(
     if n_weeks < 2:
         raise OptionError(f"--weeks must be >= 2 (drift needs a baseline), got {n_weeks}")
     out = Path(out)
-    if out.exists() and any(out.iterdir()):
-        raise OptionError(f"--out {out}: exists and is not empty")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     table = declaration(VARIANT).reference_file

@@ -115,7 +115,7 @@ class LogWriter:
             (self.partial, "is a partial recording left by a killed run"),
         ):
             if existing.exists() and not overwrite:
-                raise OptionError(f"{existing}: {what}; move it away or pass --overwrite")
+                raise OptionError(f"{existing}: {what}; move it away or pass --force")
         self.start_time_ns = int(start_time_ns)
         self._chunk_us = round(chunk_duration_s * 1e6)
         self._flush_interval_s = flush_interval_s

@@ -130,6 +130,15 @@ def label_of(params: ParameterSet) -> str:
     return params.path.name if params.path else params.title
 
 
+def labels_of(parameter_sets: Sequence[ParameterSet]) -> tuple[str, ...]:
+    """Each set's ``label_of``, made unique by position (``#2``) where two share one."""
+    labels: list[str] = []
+    for i, params in enumerate(parameter_sets):
+        label = label_of(params)
+        labels.append(label if label not in labels else f"{label} #{i + 1}")
+    return tuple(labels)
+
+
 def _channel(run_data: Channels, j: int, simulated, predicted, options) -> ChannelResult:
     valid = run_data.valid[:, j]
     measured = run_data.measured[:, j]
@@ -189,10 +198,7 @@ def validate(
     if not parameter_sets:
         raise OptionError("no parameter sets to validate")
     check_inputs(parameter_sets, recordings)
-    labels = []
-    for i, params in enumerate(parameter_sets):
-        label = label_of(params)
-        labels.append(label if label not in labels else f"{label} #{i + 1}")
+    labels = labels_of(parameter_sets)
     results = tuple(
         RecordingResult(
             rec,
@@ -203,4 +209,4 @@ def validate(
         )
         for rec in recordings
     )
-    return ValidationResult(options, tuple(labels), parameter_sets, results)
+    return ValidationResult(options, labels, parameter_sets, results)

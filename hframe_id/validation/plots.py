@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hframe_id.atomic import replace_atomically
+from hframe_id.atomic import Staging
 from hframe_id.validation.compare import RecordingResult, RunResult
 
 
@@ -79,21 +79,35 @@ def resid_png(run: RunResult, recording_name: str) -> bytes:
     return _png(figure)
 
 
+def plot_name(recording_name: str, label: str | None = None) -> str:
+    """The file of a recording's ``compare`` plot, or (``label``) of a set's ``resid`` plot."""
+    stem = Path(recording_name).stem
+    return f"{stem}-compare.png" if label is None else f"{stem}-resid-{Path(label).stem}.png"
+
+
+def plot_names(recording_names: list[str], labels: tuple[str, ...]) -> list[str]:
+    """Every plot file a validation of these recordings with these labelled sets writes."""
+    return [
+        name
+        for recording in recording_names
+        for name in (plot_name(recording), *(plot_name(recording, label) for label in labels))
+    ]
+
+
 def plot_files(entries: tuple[RecordingResult, ...]) -> dict[str, bytes]:
     """File name -> PNG bytes for every plot of a validation (nothing written yet)."""
     files = {}
     for entry in entries:
-        stem = Path(entry.recording.name()).stem
-        files[f"{stem}-compare.png"] = compare_png(entry)
+        name = entry.recording.name()
+        files[plot_name(name)] = compare_png(entry)
         for run in entry.runs:
-            files[f"{stem}-resid-{Path(run.label).stem}.png"] = resid_png(
-                run, entry.recording.name()
-            )
+            files[plot_name(name, run.label)] = resid_png(run, name)
     return files
 
 
-def write_plots(entries: tuple[RecordingResult, ...], directory: Path) -> list[Path]:
-    """Render every plot first, then write each atomically into ``directory`` (created)."""
-    files = plot_files(entries)
-    directory.mkdir(parents=True, exist_ok=True)
-    return [replace_atomically(directory / name, data) for name, data in files.items()]
+def write_plots(
+    entries: tuple[RecordingResult, ...], directory: Path, staging: Staging
+) -> list[Path]:
+    """Render every plot, staging each as a file of ``directory`` (``staging`` puts them in
+    place); their paths."""
+    return [staging.write(directory / name, data) for name, data in plot_files(entries).items()]

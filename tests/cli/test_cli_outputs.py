@@ -1,0 +1,204 @@
+"""The output guard (issue 27, item 1): every file and folder a command writes is checked
+before any work (kind, existence without ``--force``, parent, writability), and the outputs of
+one command are put in place together or not at all. Each refusal is one ``hframe-id: error:``
+line naming the option and the path, exit status 2, no traceback and nothing left behind."""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+
+import pytest
+
+from hframe_id.cli import main
+from hframe_id.fleet.store import ResultsStore
+
+ROOT = Path(__file__).resolve().parents[2]
+H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
+REC = ROOT / "datasets" / "4V_xmotion.mcap"
+STEP = ("--step", "1,4", "--duration", "0.05")
+
+
+def _listing(folder: Path) -> dict[str, bytes | None]:
+    """Every path under ``folder`` (hidden temporaries too) with a file's content."""
+    return {
+        str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None
+        for p in folder.rglob("*")
+    }
+
+
+def _refused(argv: list[str], capsys, *named: str) -> str:
+    """Run ``argv``: exit status 2, exactly one error line (naming each of ``named``), no
+    traceback; the line."""
+    code = main([str(word) for word in argv])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), err
+    for word in named:
+        assert str(word) in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch) -> Path:
+    """A folder holding a plain file ``afile`` (to put outputs on and under), as the cwd."""
+    (tmp_path / "afile").write_text("not a folder\n")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> Path:
+    """A results store of two rigs, two runs each (enough for a report)."""
+    path = tmp_path_factory.mktemp("store") / "results.parquet"
+    store = ResultsStore(path)
+    for i in range(4):
+        value = 13000.0 * (1 + 0.2 * (i % 2) * (i < 2))
+        store.add(
+            {
+                "key": f"k{i}",
+                "rig": f"rig-{1 + i // 2:02d}",
+                "run_time": dt.datetime(2026, 1, 5 + 7 * (i % 2), tzinfo=dt.UTC),
+                "status": "ok",
+                "message": "",
+                "k_l [N/m]": value,
+                "k_l std [N/m]": 10.0,
+                "k_l ci95 low [N/m]": value - 20,
+                "k_l ci95 high [N/m]": value + 20,
+                "k_l identified": True,
+            }
+        )
+    store.flush()
+    return path
+
+
+#: A folder output on a file, under a file, and where nothing can be created.
+BAD_FOLDERS = (("afile", "exists and is not a directory"), ("afile/sub", "afile is not a"),
+               ("/proc/nope", "cannot write in /proc"))  # fmt: skip
+
+
+@pytest.mark.parametrize(("out", "problem"), BAD_FOLDERS)
+def test_fleet_report_out(results, work, capsys, out, problem):
+    before = _listing(work)
+    _refused(["fleet", "report", results, "--out", out], capsys, "--out", out, problem)
+    assert _listing(work) == before
+
+
+@pytest.mark.parametrize(("out", "problem"), BAD_FOLDERS)
+def test_fleet_make_out(work, capsys, out, problem):
+    before = _listing(work)
+    _refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", out], capsys, out, problem)
+    assert _listing(work) == before
+
+
+def test_fleet_make_refuses_a_folder_with_content_and_leaves_nothing_on_failure(work, capsys):
+    (work / "full").mkdir()
+    (work / "full" / "x").write_text("x")
+    _refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", "full"], capsys, "not empty")
+    before = _listing(work)
+    _refused(
+        ["fleet", "make", "--rigs", "0", "--weeks", "2", "--out", "new/fleet"], capsys, "--rigs"
+    )
+    assert _listing(work) == before  # neither new/ nor a hidden staging folder
+
+
+def test_fleet_report_replaces_an_earlier_report_only_with_force(results, work, capsys):
+    out = work / "report"
+    assert main(["fleet", "report", str(results), "--out", str(out)]) == 0
+    page = (out / "fleet-report.md").read_text()
+    assert "![k_l](plots/k_l.png)" in page and (out / "plots" / "k_l.png").is_file()
+    before = _listing(work)
+    _refused(
+        ["fleet", "report", results, "--out", out, "--json"], capsys, "fleet-report.md", "--force"
+    )
+    assert _listing(work) == before
+    assert main(["fleet", "report", str(results), "--out", str(out), "--force"]) == 0
+    assert sorted(_listing(out)) == ["fleet-report.md", "plots", "plots/k_l.png"]
+
+
+def test_simulate_plot_onto_a_folder_writes_no_csv(work, capsys):
+    (work / "plots" / "open_loop.png").mkdir(parents=True)
+    before = _listing(work)
+    argv = ["simulate", "--params", H8, *STEP, "--out", "s.csv", "--plot", "plots"]
+    _refused(argv, capsys, "--plot", "open_loop.png", "is a directory")
+    assert _listing(work) == before
+
+
+def test_simulate_mcap_refused_before_the_csv(work, capsys):
+    (work / "run.mcap").write_bytes(b"keep")
+    before = _listing(work)
+    for mcap, problem in (("run.mcap", "exists already"), ("run.txt", ".mcap file name")):
+        argv = ["simulate", "--params", H8, *STEP, "--out", "s.csv", "--mcap", mcap]
+        _refused(argv, capsys, mcap, problem)
+        assert _listing(work) == before
+
+
+def test_simulate_writes_its_outputs_together(work, capsys):
+    argv = ["simulate", "--params", str(H8), *STEP, "--out", "s.csv", "--mcap", "r.mcap",
+            "--plot", "plots"]  # fmt: skip
+    assert main(argv) == 0
+    assert sorted(_listing(work)) == ["afile", "plots", "plots/open_loop.png", "r.mcap", "s.csv"]
+    before = _listing(work)
+    _refused(argv, capsys, "--out s.csv: exists already; pass --force to replace it")
+    assert _listing(work) == before
+    assert main([*argv, "--force"]) == 0
+    assert sorted(_listing(work)) == sorted(before)  # replaced, no temporary left
+
+
+def test_validate_plot_writes_both_pngs_or_none(work, capsys):
+    blocker = work / "plots" / "4V_xmotion-resid-hframe-8-table4.2.png"
+    blocker.mkdir(parents=True)
+    before = _listing(work)
+    argv = ["validate", H8, REC, "--horizon", "0", "--plot", "plots"]
+    _refused(argv, capsys, "--plot", blocker.relative_to(work), "is a directory")
+    assert _listing(work) == before
+    blocker.rmdir()
+    assert main([str(w) for w in argv]) == 0
+    capsys.readouterr()
+    written = sorted(_listing(work / "plots"))
+    assert written == ["4V_xmotion-compare.png", blocker.name]
+    _refused(argv, capsys, "4V_xmotion-compare.png", "--force")
+
+
+@pytest.mark.parametrize(
+    ("argv", "existing"),
+    [
+        (["inspect", REC, "--plot", "keep.png"], "keep.png"),
+        (["control", "--params", H8, "--kp", "150", "--csv", "keep.csv"], "keep.csv"),
+        (["control", "--params", H8, "--kp", "150", "--plot", "p"], "p/fig5_9_path.png"),
+        (["reproduce", "--out", "rep", "--params", H8], "rep/report.md"),
+    ],
+    ids=["inspect-plot", "control-csv", "control-plot", "reproduce-out"],
+)
+def test_an_existing_output_needs_force(work, capsys, argv, existing):
+    (work / existing).parent.mkdir(exist_ok=True)
+    (work / existing).write_text("precious\n")
+    before = _listing(work)
+    _refused(argv, capsys, existing, "exists already; pass --force to replace it")
+    assert _listing(work) == before
+
+
+def test_inspect_plot_force_replaces_the_png(work, capsys):
+    (work / "keep.png").write_text("precious\n")
+    assert main(["inspect", str(REC), "--plot", "keep.png", "--force"]) == 0
+    assert (work / "keep.png").read_bytes().startswith(b"\x89PNG")
+    assert sorted(_listing(work)) == ["afile", "keep.png"]
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "problem"),
+    [
+        ("--out-dir", "/proc/nope", "cannot write in /proc"),
+        ("--out-dir", "afile", "exists and is not a directory"),
+        ("--results", "afile/r.parquet", "afile is not a directory"),
+    ],
+)
+def test_batch_outputs_checked_before_any_fit(work, capsys, option, value, problem):
+    manifest = work / "manifest.yaml"
+    manifest.write_text("format_version: '1.0'\nfits: []\n")
+    argv = ["batch", manifest, "--results", "r.parquet", "--workers", "1", option, value]
+    before = _listing(work)
+    _refused(argv, capsys, option, value, problem)
+    assert _listing(work) == before
