@@ -48,7 +48,7 @@ datasets: $(STAMP)
 	$(BIN)/hframe-id datasets make --out datasets
 
 reproduce: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/hframe-id reproduce --out reports/reproduction
+	MPLBACKEND=Agg $(BIN)/hframe-id reproduce --out reports/reproduction --force
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
