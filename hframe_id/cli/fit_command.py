@@ -279,10 +279,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--max-misfit",
         type=float,
-        default=5.0,
-        help="a fit whose residual rms exceeds this many noise std (the rig's noise "
-        "model) fails: a local optimum far from the data (raise it for hardware data "
-        "with unmodelled effects)",
+        default=None,
+        help="a fit whose residual rms exceeds this many std of the sensors' noise (the "
+        "rig's specification or --channel-std, never a level estimated from the residuals) "
+        "fails (default: 5 for a fit weighted by the sensors' noise, no limit for one that "
+        "estimated its noise levels under model mismatch)",
     )
     parser.add_argument(
         "--uncertainty",

@@ -65,6 +65,10 @@ PENALTY_COST_RTOL = 1e-3
 INTERMEDIATE_STEP_TOL = 1e-4
 #: Residual rms (noise std) above which an unconverged fit is not worth holding parameters.
 MISFIT = 1.5
+#: Misfit limit of a fit weighted by the sensors' noise (residual rms in sensor std) when
+#: ``FitOptions.max_misfit`` is not given: far above a correct fit on sim-rig data (1.0-1.3),
+#: far below the wrong optima measured on one-axis data (10-45).
+DEFAULT_MAX_MISFIT = 5.0
 #: Relative standard error above which parameters are held together, not one at a time.
 HOPELESS_STD = 1.0
 INTERMEDIATE_DEFECT_TOL = 1.0
@@ -200,9 +204,17 @@ class FitResult:
 
     @property
     def residual_rms(self) -> float:
-        """Residual rms over the valid samples in units of the channels' noise std (about
-        1 for a correct model on sim-rig data)."""
+        """Residual rms over the valid samples in units of the noise std the channels were
+        weighted by (about 1 for a correct model on sim-rig data; about 1 by construction
+        once the noise levels were estimated from the residuals)."""
         return float(self.diagnostics.get("residual_rms_noise_std", math.nan))
+
+    @property
+    def residual_rms_sensor(self) -> float:
+        """Residual rms over the valid samples in units of the sensors' noise std (the
+        user's ``channel_std`` or the rig's specification): the misfit that a level estimated
+        from the residuals cannot hide."""
+        return float(self.diagnostics.get("residual_rms_sensor_std", math.nan))
 
     def held_statement(self) -> str | None:
         """What the intervals assume about held parameters (None if nothing is held or
@@ -326,7 +338,8 @@ class FitResult:
         lines += [s for s in self.search_statements if s]
         lines.append(
             f"{'success' if self.success else 'FAILED'}: {self.message} "
-            f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} noise std, "
+            f"(cost {self.cost:.6g}, residual rms {self.residual_rms:.3g} x the weights' "
+            f"noise std, {self.residual_rms_sensor:.3g} x the sensors', "
             f"{self.iterations} iterations in all stages, {self.wall_time_s:.2f} s)"
         )
         return "\n".join(lines)
@@ -705,6 +718,7 @@ def _fit_in_box(
     gn.evaluations = counter["evaluations"]
     result = _result(problem, ms, gn, state, stages, stats, held, start)
     result.diagnostics["noise"] = _noise_report(problem, sensor_std, result, rounds, settling)
+    result = _misfit_judged(result, ms, state, sensor_std, estimated=bool(rounds))
     _include_held_uncertainty(problem, recordings, state, result)
     result.wall_time_s = time.perf_counter() - start
     return result
@@ -955,6 +969,35 @@ def is_at_bound(theta: float, lower: float, upper: float, relative_std: float) -
     within ``AT_BOUND_STD`` of its relative standard error (at most 1) of it, or 1e-9."""
     near = 1e-9 + AT_BOUND_STD * min(relative_std, 1.0)
     return theta <= lower + near or theta >= upper - near
+
+
+def _misfit_judged(result: FitResult, ms, state, sensor_std: np.ndarray, estimated: bool):
+    """``result`` with its residual rms in units of the sensors' noise (``sensor_std`` [SI]:
+    the user's ``channel_std`` or the rig's specification, never a level estimated from the
+    residuals) in ``diagnostics["residual_rms_sensor_std"]``, failed as a poor fit if that
+    exceeds the misfit limit: ``FitOptions.max_misfit`` if given, else ``DEFAULT_MAX_MISFIT``
+    for a fit weighted by the sensors' noise, and no limit for one that estimated its noise
+    levels (model mismatch: stated with its evidence in the report, and judged against the
+    points the fit knows instead)."""
+    used = ms.weight > 0
+    scale = ms.problem.channel_std / sensor_std
+    residual = state.evaluation.residual * scale
+    misfit = float(np.sqrt(np.mean(residual[used] ** 2))) if used.any() else math.nan
+    result.diagnostics["residual_rms_sensor_std"] = misfit
+    options = result.options
+    limit = options.max_misfit
+    if limit is None and not estimated:
+        limit = DEFAULT_MAX_MISFIT
+    if not result.success or limit is None or not misfit > limit:
+        return result
+    given = "FitOptions.max_misfit / --max-misfit" if options.max_misfit else "the default"
+    return replace(
+        result,
+        success=False,
+        message=f"converged to a poor fit: residual rms {misfit:.3g} x the sensors' noise "
+        f"(limit {limit:g}, {given}); a local optimum far from the data, or a model that "
+        "cannot follow it: try a start closer to the plant",
+    )
 
 
 def _noise_report(
@@ -1438,16 +1481,9 @@ def _result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         for name, designs in advice.items():
             estimates[name] = replace(estimates[name], identified_by=designs)
     misfit = ms.residual_rms(state.evaluation.cost)
-    too_far = misfit > options.max_misfit
-    success = final.converged and not too_far
+    success = final.converged
     if not final.converged:
         message = f"did not converge: {final.message}"
-    elif too_far:
-        message = (
-            f"converged to a poor fit: residual rms {misfit:.3g} x the noise model "
-            f"(limit {options.max_misfit:g}, FitOptions.max_misfit / --max-misfit); a local "
-            "optimum far from the data: try a start closer to the plant"
-        )
     else:
         message = final.message
         message += _at_bound_clause(at_bound)

@@ -202,11 +202,14 @@ class FitOptions:
     defect_tol : continuity defects, in units of the measurement noise, at convergence.
     identifiability_threshold : a free parameter whose relative standard error exceeds this
         is reported as not identified, fixed at its initial value and the fit re-solved.
-    max_misfit : a converged fit whose residual rms exceeds this many noise standard
-        deviations (of the rig's noise model) is reported as failed: a local optimum far
-        from the data, not an estimate. 5 is far above a correct fit on sim-rig data
-        (1.0-1.3) and far below the wrong optima measured on one-axis data (10-45); real
-        hardware with unmodelled effects may need more.
+    max_misfit : a converged fit whose residual rms exceeds this many standard deviations
+        of the sensors' noise (``channel_std`` or the rig's specification; never a level
+        estimated from the residuals) is reported as failed: a local optimum far from the
+        data, or a model that cannot follow it. None (default): 5 (``fit.DEFAULT_MAX_MISFIT``:
+        far above a correct fit on sim-rig data, 1.0-1.3, far below the wrong optima measured
+        on one-axis data, 10-45) for a fit weighted by the sensors' noise, and no limit for
+        one that estimated its noise levels (model mismatch, judged against the points the
+        fit knows and stated with that evidence).
     uncertainty : ``"robust"`` (default): per parameter the larger of the ``"noise-model"``
         and ``"hac"`` errors; ``"noise-model"``: parametric bootstrap of the linearised
         estimator with the rig's noise model (encoder quantization, laser noise);
@@ -254,7 +257,7 @@ class FitOptions:
     step_tol: float = 1e-6
     defect_tol: float = 1e-2
     identifiability_threshold: float = 0.1
-    max_misfit: float = 5.0
+    max_misfit: float | None = None
     uncertainty: str = "robust"
     confidence: float = 0.95
     substep_safety: float = 1.5
@@ -332,10 +335,11 @@ class FitOptions:
             "step_tol",
             "defect_tol",
             "identifiability_threshold",
-            "max_misfit",
             "substep_safety",
         ):
             _positive(name, getattr(self, name))
+        if self.max_misfit is not None:
+            _positive("max_misfit", self.max_misfit)
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
         _positive("max_substeps", self.max_substeps, integer=True)
@@ -471,7 +475,7 @@ class FitOptions:
             "step_tol": float(self.step_tol),
             "defect_tol": float(self.defect_tol),
             "identifiability_threshold": float(self.identifiability_threshold),
-            "max_misfit": float(self.max_misfit),
+            "max_misfit": None if self.max_misfit is None else float(self.max_misfit),
             "known_points": [p.title for p in self.known_points],
             "zero_reachable": list(self.zero_reachable),
             "starts": int(self.starts),

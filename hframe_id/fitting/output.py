@@ -135,6 +135,7 @@ def provenance(
             "iterations": int(result.iterations),
             "final_cost": _number(result.cost),
             "residual_rms_noise_std": _number(result.residual_rms),
+            "residual_rms_sensor_std": _number(result.residual_rms_sensor),
             "wall_time_s": round(float(result.wall_time_s), 3),
         },
         "not_identified_held_at_initial": list(result.not_identified),

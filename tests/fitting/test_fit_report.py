@@ -225,3 +225,20 @@ def test_mismatch_is_stated_with_the_portfolio_that_reached_it(mismatched):
     )
     assert "1 of 2 starts of a multistart portfolio" in mismatch_statement(with_starts)
     assert "multistart: 1 of 2 starts reached" in with_starts.summary()
+
+
+def test_the_misfit_is_measured_against_the_sensors_not_the_estimated_levels(mismatched):
+    """Noise levels estimated from the residuals make the misfit in their own units about 1
+    whatever the fit (issue 25, item 1); the sensor-level misfit shows the mismatch, and a
+    limit the user gives is judged by it."""
+    result, recordings = mismatched
+    assert result.diagnostics["noise"]["method"] == "estimated"
+    assert result.residual_rms == pytest.approx(1.0, abs=0.2)
+    assert result.residual_rms_sensor > 3 * result.residual_rms
+    assert f"{result.residual_rms_sensor:.3g} x the sensors'" in result.summary()
+    limit = result.residual_rms_sensor / 2
+    options = FitOptions(free=("k_l", "k_r"), verbose=0, max_misfit=limit)
+    strict = fit_recordings(recordings, result.initial, options)
+    assert not strict.success
+    assert "x the sensors' noise" in strict.message
+    assert "FitOptions.max_misfit / --max-misfit" in strict.message
