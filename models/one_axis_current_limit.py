@@ -22,7 +22,8 @@ from hframe_id.models import ParameterSpec, declare, one_axis
 
 #: Corner width w [A] of the smooth limit. The earlier limit i / (1 + (i / I_max)^20)^(1/20)
 #: gave 7.75 A where the plant clips 8.05 A to 8.0 A: 3 % less torque through the whole 6 V
-#: H-frame steps (docs/fitting.md, "hframe-8 with the amplifiers' current limit").
+#: H-frame steps (docs/studies/2026-11-24-model-mismatch-hframe-8.md, "hframe-8 with the
+#: amplifiers' current limit").
 LIMIT_WIDTH = 0.02
 
 

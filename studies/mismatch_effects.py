@@ -73,8 +73,9 @@ def without_effects(plant: Plant) -> Plant:
 
 
 def variants(base: Plant | None = None) -> dict[str, Variant]:
-    """The plants of the study, by name (docs/fitting.md, "Where the held-out gap comes
-    from"): ``base`` (default: the shipped hframe-20 plant) with its effects taken away."""
+    """The plants of the study, by name (docs/studies/2026-11-24-model-mismatch-hframe-8.md,
+    "Where the held-out gap comes from"): ``base`` (default: the shipped hframe-20 plant) with
+    its effects taken away."""
     plant = base or shipped_plant("hframe-20")
     constants = plant.constants
     bare = without_effects(plant)

@@ -8,9 +8,10 @@ from models/one-axis-table2.3.yaml.
 
 The idler pulley (phi3) is not measured: by default its J_2, B_2, tau_c2 are held at the
 start's values (here equal to the truth, so this test does not measure the bias a wrong
-idler value causes; docs/fitting.md does). Tolerance 2 % (issue 5's target for friction and
-inertia; also applied to the stiffnesses); measured worst error 0.37 % (B_1), stiffnesses
-within 0.05 %. Time printed, not asserted (measured 18 s, most of it the restarts along k2, k3).
+idler value causes; docs/studies/2026-11-22-one-axis.md does). Tolerance 2 % (issue 5's target
+for friction and inertia; also applied to the stiffnesses); measured worst error 0.37 % (B_1),
+stiffnesses within 0.05 %. Time printed, not asserted (measured 18 s, most of it the restarts
+along k2, k3).
 """
 
 import math
@@ -56,8 +57,9 @@ def test_shipped_pulses_recover_friction_inertia_and_belts_within_2_percent(fit)
             assert est.identified, name
 
 
-#: Study seeds of the fresh-plant test: 0-4 of the ten measured in docs/fitting.md (seed 4 needs
-#: the restarts along k2, k3: without them it stops at a secondary optimum, k2 +19 %).
+#: Study seeds of the fresh-plant test: 0-4 of the ten measured in
+#: docs/studies/2026-11-22-one-axis.md (seed 4 needs the restarts along k2, k3: without them it
+#: stops at a secondary optimum, k2 +19 %).
 FRESH_SEEDS = (0, 1, 2, 3, 4)
 
 
@@ -66,13 +68,13 @@ def test_fresh_plants_from_starts_off_by_10_percent(seed):
     """Fresh simulated plants (the default free set x/÷1.3 off Table 2.3, standard one-axis
     pulses, rig sensors), started x/÷1.1 off the truth (study ``--start-factor 1.1``).
 
-    Measured over seeds 0-9 (docs/fitting.md, "One-axis"): 10 of 10 converge; stiffnesses
+    Measured over seeds 0-9 (docs/studies/2026-11-22-one-axis.md): 10 of 10 converge; stiffnesses
     within 0.67 %, J_1, M, B_1, b, tau_c1 within 1.72 % (issue 5's 2 % for friction and
     inertia); the cart's Coulomb friction F_c, seen only while the laser is valid, within
     2.55 %, more than 2 % on 5 of 10 seeds: its robust standard error is 1.3-4.9 %, so the
     pulses do not determine it to 2 %, and it is checked against its own interval instead
     (|error| / std error measured <= 1.7; asserted < 3). From Table 2.3: 9 of 10; from x/÷3:
-    6 of 10, the other 4 reported as failed (docs/fitting.md).
+    6 of 10, the other 4 reported as failed (docs/fitting.md, "One-axis").
     """
     from studies.recovery import run_trial
 

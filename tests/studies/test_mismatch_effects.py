@@ -1,5 +1,5 @@
 """The mismatch-effects study's plants and command line, without fitting (a fit takes minutes;
-the measured table is in docs/fitting.md)."""
+the measured table is in docs/studies/2026-11-24-model-mismatch-hframe-8.md)."""
 
 import math
 from dataclasses import replace

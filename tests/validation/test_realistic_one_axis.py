@@ -1,7 +1,8 @@
 """The realistic one-axis pulses (an 8 A current limit the 10 V pulse reaches, stick-slip,
 one sample of actuation delay, two of laser latency) fitted with a model that has the
 amplifier's current limit (models/one_axis_current_limit.py, a user model) and the sensors'
-latencies: a fit that the thesis's one-axis model cannot make (docs/fitting.md)."""
+latencies: a fit that the thesis's one-axis model cannot make
+(docs/studies/2026-11-24-mismatch-one-axis.md)."""
 
 from __future__ import annotations
 
@@ -47,7 +48,8 @@ def test_the_current_limited_model_fits_the_realistic_pulses(tmp_path, capsys):
     parameters = summary["parameters"]
     # Parameters the pulses determine (relative std < 10 %): inside their 95 % intervals of
     # the plant's own values (measured: k1 -12.5 %, J_1 -3.9 %, M +6.3 %; b, also
-    # determined, at -13.8 % is outside its interval: the unmodelled stick-slip, docs/fitting.md).
+    # determined, at -13.8 % is outside its interval: the unmodelled stick-slip,
+    # docs/studies/2026-11-24-mismatch-one-axis.md).
     for name, unit in (("k1", "N/m"), ("J_1", "kg m^2"), ("M", "kg")):
         low, high = parameters[name]["interval_95"]
         assert low <= truth[f"{name} [{unit}]"] <= high, name
