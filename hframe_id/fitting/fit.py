@@ -612,8 +612,9 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
     written file (a free-run simulation of each record from the fit's initial state,
     ``known_points.simulation_criterion``): ended worse than one, it continues from the best
-    of them; worse still, it fails saying so. A fit that failed (no file: criterion inf)
-    continues from the best point other than its start, where it has already failed."""
+    of them; worse still, it fails saying so. A fit that failed continues from the best
+    point other than its start (where it has already failed) if that point simulates the data
+    better than the failed fit's end."""
     std = dict(result.diagnostics["channel_std"])
     latency = dict(options.latency_samples)
     # Every point starts where the fit's trajectory does: its estimated initial state (a
@@ -624,7 +625,11 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     def criterion(params):
         return simulation_criterion(params, recordings, std, latency, starts)
 
-    own = criterion(result.parameters) if result.success else math.inf
+    # A failed fit's end point is a point it knows too: a continuation must beat it (dev
+    # plant 10: a fit failed on the box, continued from the equation-error estimate, ended
+    # 300 x the reduction's training criterion under its own noise levels; the failed fit's
+    # point simulated the data better).
+    own = criterion(result.parameters)
     candidates = _known_candidates(recordings, initial, options, result)
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
