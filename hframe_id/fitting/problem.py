@@ -144,7 +144,8 @@ class FitProblem:
         ``parameters``)."""
         p = np.array([params.values[n] for n in self.model.parameter_names])[list(self.free)]
         start = self.p_initial[list(self.free)]
-        with np.errstate(divide="ignore"):
+        # Linear parameters may start at 0 (0 / 0): their log is computed and not used.
+        with np.errstate(divide="ignore", invalid="ignore"):
             logs = np.log(np.abs(p / start))
         return np.where(self.linear, (p - start) / self.linear_scale, logs)
 

@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -200,3 +201,14 @@ def test_the_library_applies_the_models_fit_defaults():
         DEFAULT_SHOOTING_INTERVAL,
         DEFAULT_CONTINUITY,
     )
+
+
+def test_theta_of_a_linear_parameter_starting_at_zero_warns_nothing(hframe, recording):
+    """F_c_cart fitted linearly from 0 and at 0 (a reference file with it at 0): theta_of
+    computes 0 / 0 for the unused log."""
+    start = hframe.replace_values(F_c_cart=0.0)
+    problem = build_problem([recording], start, FitOptions(free=("k_l", "F_c_cart")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        theta = problem.theta_of(start)
+    np.testing.assert_array_equal(theta, 0.0)
