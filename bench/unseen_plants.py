@@ -51,6 +51,7 @@ from studies.unseen_plants import (
     UnseenTrial,
     run_tasks,
     trial_document,
+    whole_count,
 )
 
 #: The plants of the default run: the issue's four named plants and three dev seeds whose
@@ -200,14 +201,6 @@ def _dev_seed(text: str) -> int:
     return seed
 
 
-def _count(text: str) -> int:
-    """``--jobs`` and ``--matched-repeats`` for argparse: a whole number >= 1."""
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
 def make_parser() -> argparse.ArgumentParser:
     """The command line (``--help``)."""
     parser = argparse.ArgumentParser(
@@ -232,14 +225,14 @@ def make_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--jobs",
-        type=_count,
+        type=whole_count,
         default=1,
         help="plants fitted in parallel processes (default 1: only then are the wall ratios "
         "comparable)",
     )
     parser.add_argument(
         "--matched-repeats",
-        type=_count,
+        type=whole_count,
         default=MATCHED_REPEATS,
         metavar="N",
         help=f"timed runs of the matched fit, median used (default {MATCHED_REPEATS})",

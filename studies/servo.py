@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from hframe_id.atomic import replace_atomically
+from studies.unseen_plants import strict_json
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL_FILE = ROOT / "studies" / "models" / "rotor.py"
@@ -515,17 +516,6 @@ def run_line(run: FitRun) -> str:
     )
 
 
-def _plain(value):
-    """``value`` with NaN / inf as None: strict JSON."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    return value
-
-
 def write_json(
     path: Path, servos: dict[int, Servo], runs: list[FitRun], value_range: tuple[float, float]
 ) -> None:
@@ -536,7 +526,7 @@ def write_json(
         "servos": {str(s): {**asdict(v), "describe": v.describe()} for s, v in servos.items()},
         "runs": [{**asdict(r), "errors_percent": r.errors_percent()} for r in runs],
     }
-    replace_atomically(path, json.dumps(_plain(doc), indent=1, allow_nan=False) + "\n")
+    replace_atomically(path, json.dumps(strict_json(doc), indent=1, allow_nan=False) + "\n")
 
 
 def make_parser() -> argparse.ArgumentParser:

@@ -647,20 +647,20 @@ def summary_lines(trials: list[UnseenTrial]) -> list[str]:
     return lines
 
 
-def _plain(value):
+def strict_json(value):
     """``value`` with NaN / inf as None and tuples as lists: strict JSON."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: strict_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
+        return [strict_json(v) for v in value]
     return value
 
 
 def trial_document(t: UnseenTrial) -> dict:
     """A trial as a JSON-ready dict: its fields, the plant's line and the derived verdicts."""
-    return _plain(
+    return strict_json(
         {
             **asdict(t),
             "plant": t.draw.describe(),
@@ -684,11 +684,12 @@ def write_json(path: Path, trials: list[UnseenTrial]) -> None:
     replace_atomically(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
 
 
-def _jobs(text: str) -> int:
-    """``--jobs`` for argparse: a whole number >= 1."""
+def whole_count(text: str) -> int:
+    """A count option for argparse (``--jobs``, the bench's ``--matched-repeats``): a whole
+    number >= 1."""
     value = int(text)
     if value < 1:
-        raise argparse.ArgumentTypeError(f"--jobs must be >= 1, got {value}")
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
     return value
 
 
@@ -719,7 +720,10 @@ def make_parser() -> argparse.ArgumentParser:
         help="allow seeds 1000..1099 (the test split; look at them once, at the end)",
     )
     parser.add_argument(
-        "--jobs", type=_jobs, default=1, help="plants fitted in parallel processes (default 1)"
+        "--jobs",
+        type=whole_count,
+        default=1,
+        help="plants fitted in parallel processes (default 1)",
     )
     parser.add_argument("--json", type=Path, metavar="FILE", help="write every row to FILE")
     return parser
