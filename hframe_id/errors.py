@@ -20,6 +20,11 @@ class ModelError(HframeIdError):
     """A model variant, option or signal name does not exist or is invalid."""
 
 
+class ControllerError(ModelError):
+    """A controller file or declaration is missing or invalid, or does not fit the model and
+    recording it is run with (docs/custom-models.md, "Your own controller")."""
+
+
 class LogFormatError(HframeIdError):
     """An MCAP recording does not follow the hframe-id log format."""
 

@@ -91,7 +91,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
         help="reachable rectangle [m] (default +/-0.1 m)",
     )
-    parser.add_argument("--friction", metavar="{smooth,stick-slip}", default="smooth")
+    parser.add_argument("--friction", metavar="{smooth,stick-slip,sign}", default="smooth")
     parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")

@@ -78,9 +78,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--friction",
-        metavar="{smooth,stick-slip}",
-        help="--params: Coulomb friction law, smooth (tanh, the model's; default) or stick-slip "
-        "(Table 2.2); a plant file has its own",
+        metavar="{smooth,stick-slip,sign}",
+        help="--params: Coulomb friction law, smooth (tanh, the model's; default), stick-slip "
+        "(Table 2.2) or sign (discontinuous, as the EMPS benchmark simulates); a plant file has "
+        "its own",
     )
     parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
     parser.add_argument("--out", type=Path, required=True, help="CSV file to write")

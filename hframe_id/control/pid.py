@@ -24,11 +24,16 @@ the trial integral has the other sign it is accepted and pulls the output off th
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import casadi as ca
 
 from hframe_id.errors import OptionError
+
+if TYPE_CHECKING:
+    from hframe_id.control.declaration import ControllerDeclaration
 
 #: D/A converter range of the rig [V] (section 1.1).
 U_MIN_V = -10.0
@@ -223,3 +228,86 @@ def reset_windup_pid(
     )
     output = ca.if_else(positive, ca.if_else(high, u_max, m), ca.if_else(low, u_min, m))
     return output, new_integral
+
+
+def pid_controller(
+    loops: Mapping[str, tuple[str, str]],
+    gains: PIDGains | Mapping[str, PIDGains],
+    unit: str = "rad",
+    sample_period_s: float | None = SAMPLE_PERIOD_S,
+    u_min_v: float = U_MIN_V,
+    u_max_v: float = U_MAX_V,
+    delay_samples: int = 0,
+    name: str = "reset-windup-pid",
+) -> ControllerDeclaration:
+    """The thesis's reset-windup PID (``reset_windup_pid``, Appendix A) as a declared
+    controller (``hframe_id.control.declaration``), one loop per command.
+
+    Parameters
+    ----------
+    loops : command -> (measured output, reference signal), e.g. ``{"u1": ("phi1",
+        "phi1_ref"), "u2": ("phi2", "phi2_ref")}`` for the two motor loops of Fig. 5.2.
+    gains : one ``PIDGains`` for every loop, or one per command.
+    unit : SI unit of the measured outputs and references (``"rad"``: the motor angles); the
+        gains are in V per that unit (K_P), per unit second (K_I), V s per unit (K_D).
+    sample_period_s : T [s] (default 1 ms, section 5.3); None: the recording's.
+    u_min_v, u_max_v : output range [V] (the D/A converters, section 1.1).
+    delay_samples : samples between computing a voltage and applying it (0 in Fig. 5.8).
+    name : the controller's name.
+    """
+    from hframe_id.control.declaration import ControllerDeclaration, Gain
+    from hframe_id.models.spec import Signal
+
+    per_loop = {c: gains if isinstance(gains, PIDGains) else gains.get(c) for c in loops}
+    missing = [c for c, g in per_loop.items() if not isinstance(g, PIDGains)]
+    if missing:
+        raise OptionError(f"pid_controller: no PIDGains for {', '.join(missing)}")
+    declared_gains = []
+    for command, loop_gains in per_loop.items():
+        for symbol, value, gain_unit in (
+            ("K_P", loop_gains.kp, f"V/{unit}"),
+            ("K_I", loop_gains.ki, f"V/({unit} s)"),
+            ("K_D", loop_gains.kd, f"V s/{unit}"),
+        ):
+            declared_gains.append(
+                Gain(f"{symbol}_{command}", value, gain_unit, f"{symbol} of {command}")
+            )
+
+    def law(y, r, z, g, sample_period):
+        commands, states = {}, {}
+        for command, (output, reference) in loops.items():
+            error = r[reference] - y[output]
+            commands[command], states[f"I_{command}"] = reset_windup_pid(
+                error, z[f"e_prev_{command}"], z[f"I_{command}"],
+                g[f"K_P_{command}"], g[f"K_I_{command}"], g[f"K_D_{command}"],
+                sample_period, u_min_v, u_max_v,
+            )  # fmt: skip
+            states[f"e_prev_{command}"] = error
+        return {"commands": commands, "states": states}
+
+    return ControllerDeclaration(
+        name=name,
+        description="reset-windup PID per motor (thesis, section 5.1 and Appendix A)",
+        commands=tuple(
+            Signal(c, "V", f"voltage of the loop on {o}") for c, (o, _) in loops.items()
+        ),
+        measured=tuple(dict.fromkeys(o for o, _ in loops.values())),
+        references=tuple(
+            Signal(r, unit, f"reference of {o}")
+            for r, o in {r: o for o, r in loops.values()}.items()
+        ),
+        states=tuple(
+            Signal(state, state_unit, what)
+            for c in loops
+            for state, state_unit, what in (
+                (f"e_prev_{c}", unit, "previous error e_{k-1}"),
+                (f"I_{c}", "V", "stored integral term I_k (K_I-weighted)"),
+            )
+        ),
+        gains=tuple(declared_gains),
+        law=law,
+        sample_period_s=sample_period_s,
+        delay_samples=delay_samples,
+        limits=tuple((c, u_min_v, u_max_v) for c in loops),
+        source="hframe_id.control.pid",
+    )

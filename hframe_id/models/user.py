@@ -42,7 +42,7 @@ OPTIONAL_KEYS = ("forces", "friction")
 Equations = Callable[..., Mapping[str, Any]]
 
 
-class _Declared(Mapping[str, ca.SX]):
+class DeclaredSymbols(Mapping[str, ca.SX]):
     """Symbols by declared name; looking up an undeclared name is a ``ModelError``."""
 
     def __init__(self, what: str, symbols: dict[str, ca.SX], where: str) -> None:
@@ -84,10 +84,10 @@ def _lagrangian(
         q = ca.SX.sym("q", len(names))
         qdot = ca.SX.sym("qdot", len(names))
         result = equations(
-            _Declared("coordinate", {n: q[i] for i, n in enumerate(names)}, where),
-            _Declared("rate", {n: qdot[i] for i, n in enumerate(names)}, where),
-            _Declared("input", {s.name: u[i] for i, s in enumerate(inputs)}, where),
-            _Declared("parameter", dict(p), where),
+            DeclaredSymbols("coordinate", {n: q[i] for i, n in enumerate(names)}, where),
+            DeclaredSymbols("rate", {n: qdot[i] for i, n in enumerate(names)}, where),
+            DeclaredSymbols("input", {s.name: u[i] for i, s in enumerate(inputs)}, where),
+            DeclaredSymbols("parameter", dict(p), where),
         )
         if not isinstance(result, Mapping):
             raise ModelError(f"{where}: equations must return a dict, got {type(result).__name__}")
@@ -176,13 +176,40 @@ def declare(
     )
 
 
-def _one_line(err: BaseException, path: Path) -> str:
-    """The error with the line of the model file it happened on."""
+def error_line(err: BaseException, path: Path) -> str:
+    """The error with the line of the declaration file it happened on."""
     frames = [f for f in traceback.extract_tb(err.__traceback__) if Path(f.filename) == path]
     line = f" (line {frames[-1].lineno})" if frames else ""
     if isinstance(err, SyntaxError):
         line = f" (line {err.lineno})"
     return f"{type(err).__name__}{line}: {err}".splitlines()[0]
+
+
+def run_declaration_file(
+    path: str | Path, kind: str, error: type[ModelError] = ModelError
+) -> tuple[Path, ModuleType]:
+    """Execute a model or controller file (``kind``: ``"model file"``, ``"controller file"``)
+    as a module of its own; returns its resolved path and the module.
+
+    Every problem (no such file, not Python, any error while it runs) is one ``error`` line
+    naming the file, and the line of the file for a Python error.
+    """
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise error(f"{kind} {path} does not exist")
+    if path.suffix != ".py":
+        raise error(f"{kind} {path}: expected a Python file (.py), got {path.suffix!r}")
+    module_name = f"hframe_id_{kind.replace(' ', '_')}_{abs(hash(str(path)))}"
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except ModelError as err:
+        message = str(err)
+        raise error(message if str(path) in message else f"{path}: {message}") from None
+    except Exception as err:
+        raise error(f"{kind} {path}: {error_line(err, path)}") from None
+    return path, module
 
 
 def sibling_module(model_file: str | Path, file_name: str) -> ModuleType:
@@ -204,21 +231,7 @@ def load_model_file(path: str | Path) -> ModelDeclaration:
     from hframe_id.models.model import freeze
     from hframe_id.models.registry import register
 
-    path = Path(path).resolve()
-    if not path.is_file():
-        raise ModelError(f"model file {path} does not exist")
-    if path.suffix != ".py":
-        raise ModelError(f"model file {path}: expected a Python file (.py), got {path.suffix!r}")
-    module_name = f"hframe_id_model_file_{abs(hash(str(path)))}"
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    module = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(module)
-    except ModelError as err:
-        message = str(err)
-        raise ModelError(message if str(path) in message else f"{path}: {message}") from None
-    except Exception as err:
-        raise ModelError(f"model file {path}: {_one_line(err, path)}") from None
+    path, module = run_declaration_file(path, "model file")
     declared = getattr(module, "MODEL", None)
     if not isinstance(declared, ModelDeclaration):
         raise ModelError(

@@ -19,6 +19,7 @@ from hframe_id.simulation.compiled import evaluate, maybe_compile
 from hframe_id.simulation.friction import (
     FrictionOptions,
     dynamics_function,
+    sign_substeps,
     stick_slip_substeps,
 )
 from hframe_id.simulation.integrators import rk4_function, stable_substeps
@@ -50,9 +51,12 @@ def _trajectory_function(
 def default_substeps(
     model: Model, p: np.ndarray, dt: float, friction: FrictionOptions = SMOOTH
 ) -> int:
-    """RK4 substeps per sample: stable for the smoothed Coulomb mode, or band-resolving."""
+    """RK4 substeps per sample: stable for the smoothed Coulomb mode, band-resolving for
+    stick-slip, as fine as the benchmark's steps for the sign law."""
     if friction.model == "smooth":
         return stable_substeps(model, p, dt, model.options.smoothing)
+    if friction.model == "sign":
+        return sign_substeps(model, p, dt)
     return stick_slip_substeps(model, p, dt, friction.band)
 
 

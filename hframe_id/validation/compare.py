@@ -1,5 +1,8 @@
 """Validation of parameter sets on recordings: per recording, parameter set and channel, the
-simulation fit, the k-step-ahead prediction fit and the residual tests (``resid``)."""
+simulation fit, the k-step-ahead prediction fit and the residual tests (``resid``); per
+recording and parameter set, the scores the literature uses: the open-loop RMSE after an
+initialisation window, the inverse-model force error and, with a declared controller, the
+closed-loop relative errors."""
 
 from __future__ import annotations
 
@@ -8,11 +11,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hframe_id.control.declaration import ControllerDeclaration
+from hframe_id.control.loop import check_fits
 from hframe_id.errors import OptionError
+from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
+from hframe_id.simulation.friction import FrictionOptions
 from hframe_id.validation.checks import check_inputs
+from hframe_id.validation.closed_loop import ClosedLoopScore, closed_loop_score
+from hframe_id.validation.inverse_model import InverseModelScore, inverse_model_score
 from hframe_id.validation.metrics import fit_percent
+from hframe_id.validation.open_loop_rmse import DEFAULT_INIT_SAMPLES, open_loop_rmse
 from hframe_id.validation.prediction import DEFAULT_HORIZON, DEFAULT_WINDOW, predict_ahead
 from hframe_id.validation.replay import Channels, simulate_channels
 from hframe_id.validation.residuals import (
@@ -32,17 +42,31 @@ class ValidationOptions:
     horizon : k of the k-step-ahead prediction [samples], >= 1; 0 skips the prediction.
     window : past samples m for the prediction's state estimate, >= 1.
     max_lag : largest lag L of the residual correlations [samples], >= 1.
+    init_samples : samples that initialise the open-loop RMSE (not counted in it), >= 1.
+    controller : the controller the rig ran under; given, every parameter set is also run in
+        closed loop with it (``closed_loop``).
+    friction : Coulomb law of the closed loop and the inverse model: ``"sign"`` (the
+        benchmarks' discontinuous law, their published numbers), ``"smooth"`` (the model's
+        tanh, as fitted) or ``"stick-slip"`` (``hframe_id.simulation.friction``).
     """
 
     horizon: int = DEFAULT_HORIZON
     window: int = DEFAULT_WINDOW
     max_lag: int = DEFAULT_MAX_LAG
+    init_samples: int = DEFAULT_INIT_SAMPLES
+    controller: ControllerDeclaration | None = None
+    friction: str = "sign"
 
     def __post_init__(self) -> None:
-        for name, low in (("horizon", 0), ("window", 1), ("max_lag", 1)):
+        for name, low in (("horizon", 0), ("window", 1), ("max_lag", 1), ("init_samples", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise OptionError(f"{name} must be an integer >= {low} samples, got {value!r}")
+        if self.controller is not None and not isinstance(self.controller, ControllerDeclaration):
+            raise OptionError(
+                f"controller must be a ControllerDeclaration, got {self.controller!r}"
+            )
+        FrictionOptions(self.friction)
 
 
 @dataclass(frozen=True)
@@ -97,6 +121,9 @@ class RunResult:
     data : the recording's channels (measured, valid, inputs).
     simulated, predicted : (N, n_y) simulated and k-step-ahead outputs [rad or m].
     channels : per-channel results, in the model's output order.
+    open_loop_rmse : by channel, the open-loop RMSE after ``init_samples`` [SI unit].
+    inverse_model : the inverse-model (IDIM) force error.
+    closed_loop : the closed-loop relative errors, None without a controller.
     """
 
     label: str
@@ -105,6 +132,9 @@ class RunResult:
     simulated: np.ndarray
     predicted: np.ndarray
     channels: tuple[ChannelResult, ...]
+    open_loop_rmse: dict[str, float]
+    inverse_model: InverseModelScore
+    closed_loop: ClosedLoopScore | None
 
 
 @dataclass(frozen=True)
@@ -171,7 +201,21 @@ def validate_one(
     channels = tuple(
         _channel(data, j, simulated, predicted, options) for j in range(len(data.names))
     )
-    return RunResult(label, params, data, simulated, predicted, channels)
+    friction = FrictionOptions(options.friction)
+    closed_loop = None
+    if options.controller is not None:
+        closed_loop = closed_loop_score(params, recording, options.controller, friction)
+    return RunResult(
+        label,
+        params,
+        data,
+        simulated,
+        predicted,
+        channels,
+        open_loop_rmse(params, recording, options.init_samples),
+        inverse_model_score(params, data, friction),
+        closed_loop,
+    )
 
 
 def validate(
@@ -192,12 +236,19 @@ def validate(
     ------
     OptionError : before any simulation, if a set's model cannot produce a recording's
         channels from its inputs, or the recordings come from different rigs.
+    ControllerError : before any simulation, if the controller does not drive a set's model
+        or reads a signal a recording lacks.
     """
     options = options or ValidationOptions()
     parameter_sets = tuple(parameter_sets)
     if not parameter_sets:
         raise OptionError("no parameter sets to validate")
     check_inputs(parameter_sets, recordings)
+    if options.controller is not None:
+        for params in parameter_sets:
+            for rec in recordings:
+                check_fits(options.controller, build_model(params.variant), rec)
+                options.controller.sample_period(rec)
     labels = labels_of(parameter_sets)
     results = tuple(
         RecordingResult(

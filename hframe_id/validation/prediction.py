@@ -155,6 +155,23 @@ def estimate_states(windows: _Windows, x_guess: np.ndarray) -> np.ndarray:
     return x0
 
 
+def _state_guess(model: Model, p: np.ndarray, data: Channels, count: int) -> np.ndarray:
+    """(count, n_x) start guesses: measured positions (rigid-motion fill), finite-difference
+    velocities."""
+    positions = measured_positions(model, p, data)
+    velocities = np.gradient(positions, data.sample_period_s, axis=0)
+    return np.hstack([positions, velocities])[:count]
+
+
+def initial_state(params: ParameterSet, data: Channels, window: int) -> np.ndarray:
+    """(n_x,) the state at the first sample estimated from samples 0 .. ``window`` alone, as
+    each prediction window's state is (output-error least squares, module docstring)."""
+    model = build_model(params.variant)
+    p = model.parameter_vector(params.values)
+    windows = _Windows(model, p, data, window, 1)
+    return estimate_states(windows, _state_guess(model, p, data, 1))[0]
+
+
 def predict_ahead(
     params: ParameterSet,
     data: Channels,
@@ -179,10 +196,7 @@ def predict_ahead(
     if n_windows < 1:
         return predicted
     windows = _Windows(model, p, data, window, n_windows)
-    positions = measured_positions(model, p, data)
-    velocities = np.gradient(positions, data.sample_period_s, axis=0)
-    guess = np.hstack([positions, velocities])[:n_windows]
-    x0 = estimate_states(windows, guess)
+    x0 = estimate_states(windows, _state_guess(model, p, data, n_windows))
     states = windows.simulate(x0, window + horizon)
     predicted[window + horizon :] = states[:, -1] @ windows.c.T
     return predicted
