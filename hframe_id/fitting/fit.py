@@ -37,7 +37,7 @@ import numpy as np
 
 from hframe_id.fitting.consider import consider_covariance
 from hframe_id.fitting.equation_error import equation_error_start
-from hframe_id.fitting.known_points import known_points, reference_sets, simulation_criterion
+from hframe_id.fitting.known_points import Criterion, known_points, reference_sets
 from hframe_id.fitting.multistart import judged, seeded_starts
 from hframe_id.fitting.multistart import statement as multistart_statement
 from hframe_id.fitting.nlp import NlpSettings, solve_nlp
@@ -280,9 +280,10 @@ class FitResult:
         own = points["fit"]
         others = {k: v for k, v in points.items() if k != "fit"}
         label = min(others, key=others.get)
+        name = self.diagnostics.get("known_points_criterion", "simulation criterion")
         return (
-            f"simulation criterion from the recordings' start (chi^2 / 2 under the fit's "
-            f"noise levels): {own:.6g}; the best known point, {label}: {others[label]:.6g}"
+            f"{name} from the recordings' start: {own:.6g}; the best known point, {label}: "
+            f"{others[label]:.6g}"
         )
 
     @property
@@ -473,8 +474,7 @@ def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitRes
         if progress is not None:
             progress(FitProgress(label, 0, math.nan, math.nan, math.nan, "fitting from it"))
         results.append((label, _started_from(_fit_widening(recordings, start, options), initial)))
-    std = dict(first.diagnostics["channel_std"])
-    outcomes = judged(results, recordings, std, dict(options.latency_samples))
+    outcomes = judged(results, Criterion.of(first, recordings))
     k = min(range(len(outcomes)), key=lambda i: outcomes[i].criterion)
     best = results[k][1]
     best.diagnostics["starts"] = outcomes
@@ -611,47 +611,41 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
 def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
     written file (a free-run simulation of each record from the fit's initial state,
-    ``known_points.simulation_criterion``): ended worse than one, it continues from the best
-    of them; worse still, it fails saying so. A fit that failed continues from the best
-    point other than its start (where it has already failed) if that point simulates the data
-    better than the failed fit's end."""
-    std = dict(result.diagnostics["channel_std"])
-    latency = dict(options.latency_samples)
+    ``known_points.Criterion``): ended worse than one, it continues from the best of them;
+    worse still, it fails saying so. A fit that failed continues from the best point other
+    than its start (where it has already failed) if that point simulates the data better
+    than the failed fit's end."""
+    criterion = Criterion.of(result, recordings)
     # Every point starts where the fit's trajectory does: its estimated initial state (a
     # record at rest: velocities zero, positions within a sensor's resolution of the
     # replay's). That favours the fit, so a point that still beats it is better.
     starts = list(result.initial_states)
-
-    def criterion(params):
-        return simulation_criterion(params, recordings, std, latency, starts)
-
     # A failed fit's end point is a point it knows too: a continuation must beat it (dev
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended
-    # 300 x the reduction's training criterion under its own noise levels; the failed fit's
-    # point simulated the data better).
-    own = criterion(result.parameters)
+    # 300 x the reduction's training criterion; the failed fit's point simulated better).
+    own = criterion(result.parameters, starts)
     candidates = _known_candidates(recordings, initial, options, result)
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
     if not candidates:
         return result
-    points = known_points(candidates, recordings, std, latency, starts)
+    points = known_points(candidates, criterion, starts)
     best = points[0]
     report = {"fit": own, **{p.label: p.criterion for p in points}}
-    # Differences under LIKELIHOOD_RATIO_95 (chi^2 / 2) are not significant at 95 %: such a
-    # point is not better, and a continued fit that ends there has reached it.
+    result.diagnostics["known_points_criterion"] = criterion.name
+    # Differences under LIKELIHOOD_RATIO_95 are not significant at 95 %: such a point is not
+    # better, and a continued fit that ends there has reached it.
     if best.criterion >= own - LIKELIHOOD_RATIO_95:
         result.diagnostics["known_points"] = report
         return result
     again = _started_from(_fit_widening(recordings, best.parameters, options), initial)
     continued = (
-        simulation_criterion(again.parameters, recordings, std, latency, list(again.initial_states))
-        if again.success
-        else math.inf
+        criterion(again.parameters, list(again.initial_states)) if again.success else math.inf
     )
     report[f"fit continued from {best.label}"] = continued
     if continued <= best.criterion + LIKELIHOOD_RATIO_95:
         again.diagnostics["known_points"] = report
+        again.diagnostics["known_points_criterion"] = criterion.name
         why = "failed" if not result.success else "ended worse"
         again.message += f"; continued from {best.label}, where the first fit {why}"
         return again
@@ -662,9 +656,9 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     return replace(
         result,
         success=False,
-        message=f"did not converge: the fit ends worse than {best.label} (simulation "
-        f"criterion {own:.6g} against {best.criterion:.6g}, chi^2 / 2 under the fit's noise "
-        f"levels), and a fit continued from there ends at {continued:.6g}",
+        message=f"did not converge: the fit ends worse than {best.label} ({criterion.name}: "
+        f"{own:.6g} against {best.criterion:.6g}), and a fit continued from there ends at "
+        f"{continued:.6g}",
     )
 
 

@@ -5,12 +5,13 @@ A local optimizer started from one table answers for that start. The portfolio f
 user's start and from ``FitOptions.starts - 1`` seeded draws around it, each free parameter
 scaled by a log-uniform factor in ``SPREAD`` ([1/2, 2], the spread of the issue's seeded-start
 check; real parameters, offsets of either sign, keep the start's value), and keeps the best
-successful fit by the criterion of its written file (``known_points.simulation_criterion``,
-under the noise levels of the fit from the user's start, so that every start is judged on
-one scale). A start reached the best optimum when its criterion is within
-``open_ended.LIKELIHOOD_RATIO_95`` (1.92, chi^2 / 2) of the best: a likelihood-ratio test at
-95 % cannot tell the two apart. How many did is reported: one of N says the answer depends on
-the start, N of N that the fit found the same point from everywhere it looked.
+successful fit by the criterion of its written file (``known_points.Criterion`` of the fit
+from the user's start, so that every start is judged on one scale: chi^2 / 2 under the
+sensors' noise, or concentrated over the noise levels where that fit estimated them). A start
+reached the best optimum when its criterion is within ``open_ended.LIKELIHOOD_RATIO_95``
+(1.92) of the best: a likelihood-ratio test at 95 % cannot tell the two apart. How many did
+is reported: one of N says the answer depends on the start, N of N that the fit found the
+same point from everywhere it looked.
 
 The starts run one after another: each fit already spreads its shooting windows over the
 machine's cores (``FitOptions.threads``).
@@ -24,10 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hframe_id.fitting.known_points import simulation_criterion
+from hframe_id.fitting.known_points import Criterion
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.parameters import ParameterSet
-from hframe_id.recordings.recording import Recording
 
 #: Log-uniform factor range of a seeded start around the user's start.
 SPREAD = (0.5, 2.0)
@@ -71,29 +71,19 @@ def seeded_starts(
     return starts
 
 
-def judged(
-    results: Sequence[tuple[str, object]],
-    recordings: Sequence[Recording],
-    channel_std: dict[str, float],
-    latency_samples: dict[str, int],
-) -> list[StartOutcome]:
-    """Each (label, ``FitResult``) judged by its written file's criterion under
-    ``channel_std``, from its own initial states; a failed fit scores inf."""
-    outcomes = []
-    for label, result in results:
-        criterion = (
-            simulation_criterion(
-                result.parameters,
-                recordings,
-                channel_std,
-                latency_samples,
-                list(result.initial_states),
-            )
+def judged(results: Sequence[tuple[str, object]], criterion: Criterion) -> list[StartOutcome]:
+    """Each (label, ``FitResult``) judged by ``criterion`` (the first fit's), from its own
+    initial states; a failed fit scores inf."""
+    return [
+        StartOutcome(
+            label,
+            bool(result.success),
+            criterion(result.parameters, list(result.initial_states))
             if result.success
-            else math.inf
+            else math.inf,
         )
-        outcomes.append(StartOutcome(label, bool(result.success), criterion))
-    return outcomes
+        for label, result in results
+    ]
 
 
 def reached_best(outcomes: Sequence[StartOutcome]) -> int:

@@ -12,12 +12,13 @@ answer the user needs, are the same either way.
 The test (issue 25, item 4) moves the parameter, the others held, from its value on the box
 back to the bound of the box of factor sqrt(f) (``problem.default_bounds``: ``p0 f^(+/-1/2)``
 in log scale, the previous box's bound under the widening schedule f -> f^2), and compares
-the fit's criterion (``known_points.simulation_criterion``: free-run simulation of every
-training record from the fit's initial states, chi^2 / 2 under the fit's noise levels). If it
-rises by less than ``LIKELIHOOD_RATIO_95 = 1.92``, half the 95 % quantile of chi^2 with one
-degree of freedom, the two values are not distinguishable at 95 % by a likelihood-ratio test
-with the other parameters held; freeing them could only make the rise smaller (the profile
-lies below the held slice), so the test never calls a bounded parameter open-ended.
+the fit's criterion (``known_points.Criterion``: free-run simulation of every training
+record from the fit's initial states, chi^2 / 2 under the sensors' noise levels, or
+concentrated over the noise levels where the fit estimated them). If it rises by less than
+``LIKELIHOOD_RATIO_95 = 1.92``, half the 95 % quantile of chi^2 with one degree of freedom,
+the two values are not distinguishable at 95 % by a likelihood-ratio test with the other
+parameters held; freeing them could only make the rise smaller (the profile lies below the
+held slice), so the test never calls a bounded parameter open-ended.
 
 For an open-ended parameter the scan goes on, in steps of a factor f^(1/4), through the start
 to the other side of the box, and the last value whose rise stays below the threshold is
@@ -32,7 +33,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from hframe_id.fitting.known_points import simulation_criterion
+from hframe_id.fitting.known_points import Criterion
 from hframe_id.fitting.problem import default_bounds
 from hframe_id.recordings.recording import Recording
 
@@ -87,17 +88,12 @@ def open_ends(
     names: Sequence[str],
 ) -> list[OpenEnd]:
     """The ``OpenEnd`` test of each of ``names`` (free parameters of ``result``, a
-    ``FitResult``, on its default box), under the fit's noise levels, latencies and initial
-    states."""
-    std = dict(result.diagnostics["channel_std"])
-    latency = dict(result.options.latency_samples)
+    ``FitResult``, on its default box), by the criterion of its written file
+    (``known_points.Criterion``) from its initial states."""
+    criterion = Criterion.of(result, recordings)
     starts = list(result.initial_states)
-
-    def criterion(params) -> float:
-        return simulation_criterion(params, recordings, std, latency, starts)
-
-    own = criterion(result.parameters)
-    return [_open_end(result, name, lambda p: criterion(p) - own) for name in names]
+    own = criterion(result.parameters, starts)
+    return [_open_end(result, name, lambda p: criterion(p, starts) - own) for name in names]
 
 
 def _open_end(result, name: str, rise) -> OpenEnd:

@@ -120,3 +120,26 @@ def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, ste
     assert result.initial is start
     points = result.diagnostics["known_points"]
     assert points["fit"] > points["known point 1 (H-frame 8th-order model, nonlinear friction)"]
+
+
+def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
+    """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
+    each point's own maximum-likelihood ones, less a constant, whatever levels are given."""
+    import numpy as np
+
+    from hframe_id.validation.replay import simulate_channels
+
+    concentrated = simulation_criterion(table, steps, {}, concentrated=True)
+    squares, counts = {}, {}
+    for rec in steps:
+        data, simulated = simulate_channels(table, rec)
+        for j, name in enumerate(data.names):
+            r = (data.measured[:, j] - simulated[:, j])[data.valid[:, j]]
+            squares[name] = squares.get(name, 0.0) + float(r @ r)
+            counts[name] = counts.get(name, 0) + r.size
+    own_levels = {n: np.sqrt(squares[n] / counts[n]) for n in squares}
+    at_own_levels = simulation_criterion(table, steps, own_levels)
+    constant = sum(0.5 * counts[n] * (np.log(own_levels[n] ** 2) - 1.0) for n in squares)
+    assert concentrated == pytest.approx(at_own_levels + constant, rel=1e-12)
+    # The truth simulates these records better on every channel: lower either way.
+    assert simulation_criterion(truth, steps, {}, concentrated=True) < concentrated
