@@ -1,4 +1,5 @@
-"""``hframe-id control``: simulate the two motor-angle PID loops of Chapter 5 on a path.
+"""``hframe-id control``: simulate the two motor-angle PID loops of Chapter 5 on a path, or any
+model under a declared controller (``--controller``, ``hframe_id.cli.declared_control``).
 
 Prints the per-leg path metrics of Tables 5.1-5.9 (text, or JSON with ``--json``) and with
 ``--plot DIR`` writes the thesis's views (Fig. 5.9, 5.11, 5.13, 5.18). All options are checked
@@ -44,12 +45,32 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Two independent reset-windup PID loops on the motor angles (Chapter 5, "
         "Appendix A), zero-order holds at the sample time, on an H-frame model. Prints the "
         "overshoot and maximum offset of every leg (docs/control.md). Lengths in m, speeds in "
-        "m/s (the thesis's 1 in square at 6 in/s: 0.0254 m, 0.1524 m/s).",
+        "m/s (the thesis's 1 in square at 6 in/s: 0.0254 m, 0.1524 m/s). With --controller "
+        "FILE.py --reference REC: any model (--model-file) under a declared controller, on "
+        "the recording's references and disturbances (docs/custom-models.md).",
     )
-    parser.add_argument("--params", type=Path, required=True, help="H-frame parameter file")
+    parser.add_argument(
+        "--params",
+        type=Path,
+        required=True,
+        help="parameter file: an H-frame's for the PID, any model's with --controller",
+    )
     parser.add_argument("--variant", help="require the parameter file to be of this variant")
+    declared = parser.add_argument_group("declared controller")
+    declared.add_argument(
+        "--controller",
+        metavar="FILE.py",
+        help="a controller file (CONTROLLER = declare_controller(...)), e.g. "
+        "models/emps_controller.py; replaces the PID options and the path",
+    )
+    declared.add_argument(
+        "--reference",
+        metavar="REC.mcap",
+        help="with --controller: the recording whose signals (references, disturbances) and "
+        "time base the controller runs on",
+    )
     gains = parser.add_argument_group("controller")
-    gains.add_argument("--kp", type=float, required=True, help="K_P [V/rad]")
+    gains.add_argument("--kp", type=float, help="K_P [V/rad] (required without --controller)")
     gains.add_argument("--ki", type=float, default=0.0, help="K_I [V/(rad s)] (0: PD)")
     gains.add_argument("--kd", type=float, default=0.0, help="K_D [V s/rad]")
     gains.add_argument(
@@ -183,6 +204,15 @@ def run(args: argparse.Namespace) -> int:
     Checks every option and output before simulating; writes ``--csv`` and ``--plot`` after
     the run, together.
     """
+    if args.controller is not None:
+        from hframe_id.cli import declared_control
+
+        return declared_control.run(args)
+    if args.reference is not None:
+        raise OptionError("--reference is for --controller")
+    if args.kp is None:
+        raise OptionError("--kp is required (or --controller FILE.py --reference REC.mcap)")
+
     import numpy as np
 
     from hframe_id.control.closed_loop import check_hframe, simulate_closed_loop

@@ -6,20 +6,23 @@ reference (eq. 5.12) at t_k, the reset-windup PID of Appendix A computes u_k, an
 until t_{k+1}. There is no extra computation delay.
 
 One sample (both PIDs + ``n_substeps`` RK4 steps of the plant) is one CasADi SX function whose
-accumulated state is z = [x; e_{k-1} (2); I (2)]; the horizon is its ``mapaccum``: one call for
-the whole run, optionally compiled to native code. Gains and output limits are run-time inputs,
-so a gain search reuses the same (compiled) function.
+accumulated state is z = [x; e_{k-1} (2); I (2)]: the declared controller's step
+(``hframe_id.control.loop.loop_step``) with the two loops of the built-in PID
+(``pid.pid_controller``); the horizon is its ``mapaccum``: one call for the whole run,
+optionally compiled to native code. Gains and output limits are run-time inputs, so a gain
+search reuses the same (compiled) function.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
-from hframe_id.control.pid import ControllerOptions, reset_windup_pid
+from hframe_id.control.loop import loop_step
+from hframe_id.control.pid import ControllerOptions, PIDGains, pid_controller
 from hframe_id.control.trajectory import (
     Trajectory,
     Workspace,
@@ -29,19 +32,23 @@ from hframe_id.control.trajectory import (
 from hframe_id.errors import ModelError, OptionError
 from hframe_id.models import Model
 from hframe_id.simulation.compiled import evaluate, maybe_compile
-from hframe_id.simulation.friction import FrictionOptions, dynamics_function
-from hframe_id.simulation.integrators import rk4_expression
+from hframe_id.simulation.friction import FrictionOptions
 from hframe_id.simulation.open_loop import default_substeps
 
 HFRAME_VARIANTS = ("hframe-8", "hframe-20")
+#: The two motor-angle loops of Fig. 5.2 (their gains and limits: the step's run-time inputs).
+THESIS_LOOPS = pid_controller(
+    {"u1": ("phi1", "phi1_ref"), "u2": ("phi2", "phi2_ref")}, PIDGains(0.0), name="thesis-pid"
+)
 
 
 def check_hframe(model: Model) -> None:
-    """Closed-loop control needs both motors and the end-effector position."""
+    """The Chapter 5 loops need both motors and the end-effector position."""
     if model.variant not in HFRAME_VARIANTS:
         raise ModelError(
-            f"closed-loop control needs an H-frame model ({', '.join(HFRAME_VARIANTS)}), "
-            f"got a {model.variant} model"
+            f"the thesis's PID path needs an H-frame model ({', '.join(HFRAME_VARIANTS)}), "
+            f"got a {model.variant} model; run any model under a declared controller with "
+            "--controller FILE.py --reference REC.mcap"
         )
 
 
@@ -61,34 +68,19 @@ def closed_loop_step(
     [t_k, t_{k+1}) (a computation / transport delay; d = 0 in Fig. 5.8).
     """
     check_hframe(model)
-    n_x = model.n_states
-    z = ca.SX.sym("z", n_x + 4 + 2 * delay_samples)
+    loops = replace(THESIS_LOOPS, delay_samples=delay_samples)
+    step = loop_step(model, loops, n_substeps, dt, friction_model)
+    z = ca.SX.sym("z", step.size1_in(0))
     r = ca.SX.sym("r", 2)
     p = ca.SX.sym("p", len(model.parameters))
     s = ca.SX.sym("s", 2)
     gains = ca.SX.sym("gains", 6)
     limits = ca.SX.sym("limits", 2)
-    x, previous, integral = z[:n_x], z[n_x : n_x + 2], z[n_x + 2 : n_x + 4]
-    queue = z[n_x + 4 :]
-    angles = ca.vertcat(*(x[model.index("state", name)] for name in ("phi1", "phi2")))
-    error = r - angles
-    outputs, integrals = [], []
-    for motor in range(2):
-        u_m, i_m = reset_windup_pid(
-            error[motor], previous[motor], integral[motor],
-            gains[3 * motor], gains[3 * motor + 1], gains[3 * motor + 2],
-            dt, limits[0], limits[1],
-        )  # fmt: skip
-        outputs.append(u_m)
-        integrals.append(i_m)
-    u = ca.vertcat(*outputs)
-    applied, queue_next = (queue[:2], ca.vertcat(queue[2:], u)) if delay_samples else (u, queue)
-    dynamics = dynamics_function(model, FrictionOptions(friction_model))
-    x_next = rk4_expression(dynamics, x, applied, p, s, n_substeps, dt)
+    z_next, _, _, u = step(z, r, ca.DM.zeros(model.n_inputs), p, s, ca.vertcat(gains, limits))
     return ca.Function(
         "closed_loop_step",
         [z, r, p, s, gains, limits],
-        [ca.vertcat(x_next, error, *integrals, queue_next), u],
+        [z_next, u],
         ["z", "r", "p", "s", "gains", "limits"],
         ["z_next", "u"],
     )

@@ -115,8 +115,13 @@ def loop_step(
         held, queue_next = ca.vertcat(*queue[:n_u]), ca.vertcat(*queue[n_u:], commands)
     else:
         held, queue_next = commands, ca.SX(0, 1)
-    lower, upper = zip(*(controller.limit(name) for name in inputs), strict=True)
-    u = ca.fmin(ca.fmax(held, ca.DM(lower)), ca.DM(upper)) + w
+    disturbed = {command for command, _ in controller.disturbances}
+    applied = []
+    for i, name in enumerate(inputs):
+        lower, upper = controller.limit(name)
+        value = held[i] if math.isinf(lower) else ca.fmin(ca.fmax(held[i], lower), upper)
+        applied.append(value + w[i] if name in disturbed else value)
+    u = ca.vertcat(*applied)
     dynamics = dynamics_function(model, FrictionOptions(friction_model))
     qddot = dynamics(x, u, p, s)[n_x // 2 :]
     x_next = rk4_expression(dynamics, x, u, p, s, n_substeps, dt)

@@ -243,6 +243,12 @@ def pid_controller(
     """The thesis's reset-windup PID (``reset_windup_pid``, Appendix A) as a declared
     controller (``hframe_id.control.declaration``), one loop per command.
 
+    Its gains are K_P, K_I, K_D of every loop in turn, then the output limits u_min, u_max
+    (the PID clips its output itself: the reset windup needs them); its memory is every
+    loop's previous error, then every loop's integral term. The Chapter 5 loops
+    (``closed_loop.closed_loop_step``) are this controller with gains and limits as run-time
+    inputs.
+
     Parameters
     ----------
     loops : command -> (measured output, reference signal), e.g. ``{"u1": ("phi1",
@@ -262,16 +268,19 @@ def pid_controller(
     missing = [c for c, g in per_loop.items() if not isinstance(g, PIDGains)]
     if missing:
         raise OptionError(f"pid_controller: no PIDGains for {', '.join(missing)}")
-    declared_gains = []
-    for command, loop_gains in per_loop.items():
+    declared_gains = [
+        Gain(f"{symbol}_{command}", value, gain_unit, f"{symbol} of {command}")
+        for command, g in per_loop.items()
         for symbol, value, gain_unit in (
-            ("K_P", loop_gains.kp, f"V/{unit}"),
-            ("K_I", loop_gains.ki, f"V/({unit} s)"),
-            ("K_D", loop_gains.kd, f"V s/{unit}"),
-        ):
-            declared_gains.append(
-                Gain(f"{symbol}_{command}", value, gain_unit, f"{symbol} of {command}")
-            )
+            ("K_P", g.kp, f"V/{unit}"),
+            ("K_I", g.ki, f"V/({unit} s)"),
+            ("K_D", g.kd, f"V s/{unit}"),
+        )
+    ]
+    declared_gains += [
+        Gain("u_min", u_min_v, "V", "lower output limit"),
+        Gain("u_max", u_max_v, "V", "upper output limit"),
+    ]
 
     def law(y, r, z, g, sample_period):
         commands, states = {}, {}
@@ -280,7 +289,7 @@ def pid_controller(
             commands[command], states[f"I_{command}"] = reset_windup_pid(
                 error, z[f"e_prev_{command}"], z[f"I_{command}"],
                 g[f"K_P_{command}"], g[f"K_I_{command}"], g[f"K_D_{command}"],
-                sample_period, u_min_v, u_max_v,
+                sample_period, g["u_min"], g["u_max"],
             )  # fmt: skip
             states[f"e_prev_{command}"] = error
         return {"commands": commands, "states": states}
@@ -296,18 +305,11 @@ def pid_controller(
             Signal(r, unit, f"reference of {o}")
             for r, o in {r: o for o, r in loops.values()}.items()
         ),
-        states=tuple(
-            Signal(state, state_unit, what)
-            for c in loops
-            for state, state_unit, what in (
-                (f"e_prev_{c}", unit, "previous error e_{k-1}"),
-                (f"I_{c}", "V", "stored integral term I_k (K_I-weighted)"),
-            )
-        ),
+        states=tuple(Signal(f"e_prev_{c}", unit, "previous error e_{k-1}") for c in loops)
+        + tuple(Signal(f"I_{c}", "V", "stored integral term I_k (K_I-weighted)") for c in loops),
         gains=tuple(declared_gains),
         law=law,
         sample_period_s=sample_period_s,
         delay_samples=delay_samples,
-        limits=tuple((c, u_min_v, u_max_v) for c in loops),
         source="hframe_id.control.pid",
     )
