@@ -134,7 +134,7 @@ def to_document(result: ValidationResult) -> dict[str, Any]:
 
 def _digits(value: float | None, width: int) -> str:
     """Five significant digits: enough to tell parameter sets apart."""
-    text = "-" if value is None or not math.isfinite(value) else f"{value:.5g}"
+    text = "-" if value is None or not math.isfinite(value) else f"{value:#.5g}"
     return f"{text:>{width}}"
 
 
