@@ -153,19 +153,16 @@ def _fail(declaration: ControllerDeclaration, message: str) -> None:
 
 def _check_names(declaration: ControllerDeclaration) -> None:
     named = [
-        ("command", declaration.commands),
-        ("reference", declaration.references),
-        ("state", declaration.states),
-        ("gain", declaration.gains),
+        ("command", declaration.commands, Signal),
+        ("reference", declaration.references, Signal),
+        ("state", declaration.states, Signal),
+        ("gain", declaration.gains, Gain),
     ]
-    for what, items in named:
+    for what, items, kind in named:
         seen: set[str] = set()
         for item in items:
-            if not isinstance(item, Gain | Signal):
-                _fail(
-                    declaration,
-                    f"{what} {item!r} must be a {'Gain' if what == 'gain' else 'Signal'}",
-                )
+            if not isinstance(item, kind):
+                _fail(declaration, f"{what} {item!r} must be a {kind.__name__}")
             if not isinstance(item.name, str) or not _SYMBOL.match(item.name):
                 _fail(declaration, f"{what} name {item.name!r} is not an identifier")
             if not isinstance(item.unit, str) or not item.unit.strip():

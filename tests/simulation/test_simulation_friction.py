@@ -10,6 +10,7 @@ from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
 from hframe_id.simulation.friction import (
     FrictionOptions,
+    dynamics_function,
     friction_sites,
     stick_slip_dynamics,
     stick_slip_substeps,
@@ -36,7 +37,7 @@ def _steady_rate(v, volts):
     return drive / damping
 
 
-@pytest.mark.parametrize("friction", [FrictionOptions(), STICK])
+@pytest.mark.parametrize("friction", [FrictionOptions(), STICK, FrictionOptions("sign")])
 def test_steady_speed_matches_the_power_balance(one_axis, friction):
     # The slowest mode decays with about 65 ms: after 1.5 s the transient is below 1e-10.
     model, p, values = one_axis
@@ -86,6 +87,28 @@ def test_stuck_coordinate_has_no_acceleration(one_axis):
     x = np.array([0, 1e-6, 0, 0.005, 0, 0])  # cart displaced 1 um: spring forces small
     xdot = f(x, [0.1], p, STICK.band).full().ravel()
     assert xdot[3] == 0.0
+
+
+def test_the_sign_law_is_viscous_plus_coulomb_without_a_band(one_axis):
+    """Simulink's Coulomb & Viscous Friction block (the EMPS benchmark's): b v + F_c sign(v),
+    sign(0) = 0. At rest no friction acts (where stick-slip holds); sliding, it is the full
+    Coulomb level at any speed (where tanh is still rising at 1 mm/s)."""
+    model, p, _ = one_axis
+    sign = dynamics_function(model, FrictionOptions("sign"))
+    free = model.dynamics(np.zeros(6), [0.1], p * _frictionless(model), [1.0, 1.0]).full()
+    at_rest = sign(np.zeros(6), [0.1], p, STICK.band).full()
+    np.testing.assert_allclose(at_rest, free, rtol=1e-12)
+    sliding = np.array([0, 0, 0, 0, 1e-6, 0])  # the cart at 1 um/s
+    smooth = model.dynamics(sliding, [0.0], p, model.options.smoothing).full().ravel()
+    # tanh(1e-6 / 1e-3) ~ 1e-3 of F_c: the sign law decelerates ~1000 x harder (measured 913).
+    assert sign(sliding, [0.0], p, STICK.band).full().ravel()[4] < 500 * smooth[4] < 0
+
+
+def _frictionless(model) -> np.ndarray:
+    mask = np.ones(len(model.parameters))
+    for site in friction_sites(model):
+        mask[[site.viscous, site.coulomb]] = 0.0
+    return mask
 
 
 def test_stick_slip_substeps_resolve_the_band():
