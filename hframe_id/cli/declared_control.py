@@ -14,6 +14,7 @@ import argparse
 import json
 
 from hframe_id.cli.outputs import check_file, written_together
+from hframe_id.control.trajectory import SQUARE_F_A, SQUARE_SIDE_M, SQUARE_V_MAX_M_PER_S
 from hframe_id.errors import ControllerError, OptionError
 
 #: Options of the H-frame PID path that a declared controller does not use, with their
@@ -25,7 +26,13 @@ PID_ONLY = {
     "motor2_gain_scale": 1.0,
     "sample_time": None,
     "delay_samples": 0,
+    "trajectory": "square",
+    "side": SQUARE_SIDE_M,
+    "v_max": SQUARE_V_MAX_M_PER_S,
+    "f_a": SQUARE_F_A,
     "points": None,
+    "dwell": 0.0,
+    "settle": None,
     "plot": None,
     "workspace": None,
 }
