@@ -141,8 +141,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     2 bad input, reported in one line)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(chosen_command(argv))
-    args = parser.parse_args(argv)
     try:
+        args = parser.parse_args(argv)  # a numeric option out of range: OptionError
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
             model_files.load(args)

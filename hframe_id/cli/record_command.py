@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from hframe_id.cli.json_output import emit
+from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import add_force_option, check_file, check_length
 from hframe_id.errors import OptionError
 
@@ -30,61 +31,71 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         help="sim: realistic plant file instead of --params (docs/realistic-rig.md)",
     )
-    rig.add_argument("--seed", type=int, default=0, help="sim: sensor noise seed (default 0)")
+    add_number(rig, "--seed", int, at_least=0, default=0, help="sim: sensor noise seed (default 0)")
     rig.add_argument(
         "--fast",
         action="store_true",
         help="sim: run unpaced, as fast as possible (default: real time)",
     )
     rig.add_argument("--port", help="serial: device, e.g. /dev/ttyACM0")
-    rig.add_argument(
+    add_number(
+        rig,
         "--baudrate",
-        type=int,
+        int,
+        above=0,
         default=2_000_000,
         help="serial: baud rate (ignored by USB CDC; default 2000000)",
     )
-    rig.add_argument(
+    add_number(
+        rig,
         "--watchdog-ms",
-        type=int,
+        int,
+        above=0,
         default=50,
         help="serial: device watchdog, 0 V after this long without a command (default 50)",
     )
-    rig.add_argument(
+    add_number(
+        rig,
         "--link-timeout",
-        type=float,
+        above=0,
         default=0.1,
         help="serial: link fault after this long without a sample [s] (default 0.1)",
     )
     proto = parser.add_argument_group("protocol")
     proto.add_argument("--protocol", choices=("step", "pulse", "csv", "multisine"), default="step")
-    proto.add_argument("--v1", type=float, help="step: motor 1 voltage [V]")
-    proto.add_argument("--v2", type=float, help="step: motor 2 voltage [V] (H-frame)")
-    proto.add_argument("--step", type=float, default=0.5, help="step: duration [s] (0.5)")
-    proto.add_argument("--amplitude", type=float, help="pulse: voltage [V]")
-    proto.add_argument("--width", type=float, default=0.25, help="pulse: duration [s] (0.25)")
-    proto.add_argument("--motor", type=int, default=1, help="pulse: motor (1)")
+    add_number(proto, "--v1", help="step: motor 1 voltage [V]")
+    add_number(proto, "--v2", help="step: motor 2 voltage [V] (H-frame)")
+    add_number(proto, "--step", above=0, default=0.5, help="step: duration [s] (0.5)")
+    add_number(proto, "--amplitude", help="pulse: voltage [V]")
+    add_number(proto, "--width", above=0, default=0.25, help="pulse: duration [s] (0.25)")
+    add_number(proto, "--motor", int, at_least=1, default=1, help="pulse: motor (1)")
     proto.add_argument("--csv", type=Path, help="csv: file with 'time [s],u1 [V][,u2 [V]]'")
-    proto.add_argument("--rms", type=float, default=3.0, help="multisine: RMS per motor [V] (3)")
-    proto.add_argument(
+    add_number(proto, "--rms", above=0, default=3.0, help="multisine: RMS per motor [V] (3)")
+    add_number(
+        proto,
         "--band",
-        type=float,
+        above=0,
         nargs=2,
         default=(0.5, 10.0),
         metavar=("F_MIN", "F_MAX"),
         help="multisine: frequency band [Hz] (0.5 10)",
     )
-    proto.add_argument("--period", type=float, default=2.0, help="multisine: period [s] (2)")
-    proto.add_argument("--protocol-seed", type=int, default=0, help="multisine: phase seed (0)")
-    proto.add_argument(
+    add_number(proto, "--period", above=0, default=2.0, help="multisine: period [s] (2)")
+    add_number(
+        proto, "--protocol-seed", int, at_least=0, default=0, help="multisine: phase seed (0)"
+    )
+    add_number(
+        proto,
         "--duration",
-        type=float,
+        above=0,
         default=None,
         help="record duration [s] (step/pulse default 1.0; multisine: pre-roll + period; "
         "csv: last row + 1 sample)",
     )
-    proto.add_argument(
+    add_number(
+        proto,
         "--pre-roll",
-        type=float,
+        at_least=0,
         default=0.05,
         help="step/pulse/multisine: 0 V recorded before the excitation [s] (0.05)",
     )

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.json_output import emit
+from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
@@ -64,15 +65,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     source.add_argument(
         "--recording", type=Path, help="MCAP recording whose commanded voltages to replay"
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--duration",
-        type=float,
+        above=0,
         help="simulated time [s] (needed with --step; --csv: last row + 1 sample; "
         "--recording: its length)",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--sample-time",
-        type=float,
+        above=0,
         default=None,
         help="sample (zero-order-hold) period [s] (default 0.001; a recording's own)",
     )
@@ -83,25 +86,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(Table 2.2) or sign (discontinuous, as the EMPS benchmark simulates); a plant file has "
         "its own",
     )
-    parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
+    add_number(
+        parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
+    )
     parser.add_argument("--out", type=Path, required=True, help="CSV file to write")
     parser.add_argument(
         "--mcap",
         type=Path,
         help="also record the same inputs with the sim rig (sensor models) to this MCAP file",
     )
-    parser.add_argument("--seed", type=int, default=0, help="--mcap: sensor noise seed (0)")
+    add_number(parser, "--seed", int, at_least=0, default=0, help="--mcap: sensor noise seed (0)")
     parser.add_argument("--plot", type=Path, metavar="DIR", help="write open_loop.png here")
     add_force_option(parser, "--overwrite")
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
     )
     parser.set_defaults(handler=run)
-
-
-def _positive(name: str, value: float | None) -> None:
-    if value is not None and not (math.isfinite(value) and value > 0):
-        raise OptionError(f"{name} must be > 0, got {value}")
 
 
 def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float, str]:
@@ -116,8 +116,6 @@ def _inputs(args: argparse.Namespace, n_inputs: int) -> tuple[np.ndarray, float,
             "give exactly one kind of input: --step (repeatable), --csv or --recording"
             + (f" (got {', '.join('--' + k for k in kinds)})" if kinds else "")
         )
-    _positive("--sample-time", args.sample_time)
-    _positive("--duration", args.duration)
     if args.recording:
         from hframe_id.recordings.reader import read_recording
 
@@ -258,8 +256,6 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     plant, model = _load_plant(args)
-    if args.substeps is not None and args.substeps < 1:
-        raise OptionError(f"--substeps must be >= 1, got {args.substeps}")
     _check_writable(args)
     table, dt, source = _inputs(args, model.n_inputs)
     result, n = _simulate(args, plant, model, table, dt)

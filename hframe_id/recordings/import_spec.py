@@ -6,6 +6,7 @@ file is read. ``hframe_id.recordings.importer`` carries it out.
 from __future__ import annotations
 
 import datetime as dt
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -118,13 +119,15 @@ class ImportSpec:
                 raise OptionError(f"--map: no {role} column (e.g. --map COLUMN={role}:UNIT)")
         if "time" not in roles and self.sample_period_s is None:
             raise OptionError("give --sample-period SECONDS or a time column (--map t=time:s)")
-        if self.sample_period_s is not None and not self.sample_period_s >= 1e-6:
+        period = self.sample_period_s
+        if period is not None and not (math.isfinite(period) and period >= 1e-6):
             raise OptionError(
-                f"--sample-period must be >= 1e-6 s (the log's clock counts microseconds), "
-                f"got {self.sample_period_s}"
+                f"--sample-period must be finite and >= 1e-6 s (the log's clock counts "
+                f"microseconds), got {period}"
             )
-        if self.counts_per_rev is not None and not self.counts_per_rev > 0:
-            raise OptionError(f"--counts-per-rev must be > 0, got {self.counts_per_rev}")
+        counts = self.counts_per_rev
+        if counts is not None and not (math.isfinite(counts) and counts > 0):
+            raise OptionError(f"--counts-per-rev must be finite and > 0, got {counts}")
         for column in self.columns:
             unit = self.unit(column)
             if column.role == "time" and unit.si != "s":

@@ -1,0 +1,72 @@
+"""Range checks of numeric options and metadata (issue 27, item 3): a value out of range, or
+inconsistent with the data it is used on, is one ``hframe-id: error:`` line naming the option
+(or file, or field) and the value, exit status 2, before any work, nothing written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hframe_id.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
+REC = ROOT / "datasets" / "4V_xmotion.mcap"
+RECORD = ["record", "--rig", "sim", "--params", H8, "--fast", "--out", "run.mcap"]
+
+
+def _refused(argv: list, capsys, *named: str) -> str:
+    """Run ``argv``: exit status 2, exactly one error line naming each of ``named``, no
+    traceback; the line."""
+    code = main([str(word) for word in argv])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), err
+    for word in named:
+        assert str(word) in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch) -> Path:
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    ("extra", "option", "value"),
+    [
+        (["--seed", "-1", "--v1", "1", "--v2", "1"], "--seed", "-1"),
+        (["--protocol", "pulse", "--amplitude", "1", "--width", "0"], "--width", "0"),
+        (["--protocol", "multisine", "--rms", "-1"], "--rms", "-1"),
+        (["--protocol", "multisine", "--rms", "nan"], "--rms", "nan"),
+    ],
+)
+def test_record_option_out_of_range(work, capsys, extra, option, value):
+    _refused([*RECORD, *extra], capsys, option, value)
+    assert list(work.iterdir()) == []
+
+
+def test_simulate_seed_and_sample_time(work, capsys):
+    step = ["simulate", "--params", H8, "--step", "1,4", "--duration", "0.05", "--out", "s.csv"]
+    _refused([*step, "--mcap", "s.mcap", "--seed", "-1"], capsys, "--seed", "-1")
+    _refused([*step, "--sample-time", "inf"], capsys, "--sample-time", "inf")
+    assert list(work.iterdir()) == []
+
+
+def _counts_csv(folder: Path) -> Path:
+    path = folder / "counts.csv"
+    path.write_text("time [s],u1 [V],pos [counts]\n0,1,10\n0.001,1,20\n0.002,1,30\n")
+    return path
+
+
+def test_import_infinite_counts_per_rev(work, capsys):
+    csv = _counts_csv(work)
+    maps = ["--map", "time [s]=time:s", "--map", "u1 [V]=input:V:u1"]
+    maps += ["--map", "pos [counts]=output:counts:pos"]
+    argv = ["import", csv, *maps, "--counts-per-rev", "inf", "--variant", "x", "--out", "c.mcap"]
+    _refused(argv, capsys, "--counts-per-rev", "inf")
+    assert sorted(p.name for p in work.iterdir()) == ["counts.csv"]
