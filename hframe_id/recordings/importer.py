@@ -27,7 +27,7 @@ from hframe_id.errors import OptionError
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import VALID_SUFFIX, Channels
 from hframe_id.recordings.import_spec import RIG_KEYS, ImportSpec
-from hframe_id.recordings.reader import read_recording
+from hframe_id.recordings.reader import clock_mismatch, read_recording
 from hframe_id.recordings.sources import SourceDataError, SourceTable, read_source
 from hframe_id.recordings.units import COUNTS
 from hframe_id.recordings.writer import LogWriter
@@ -143,6 +143,12 @@ def _clock(
             f"{raw[i - 1]:.9g} {column.unit}"
         )
     if spec.sample_period_s is not None:
+        step_s = clock_mismatch(spec.sample_period_s, device_time_us, np.arange(n))
+        if step_s is not None:
+            raise OptionError(
+                f"{table.path}: --sample-period {spec.sample_period_s:g} s does not match "
+                f"time column {column.source!r}, whose samples are {step_s * 1e3:g} ms apart"
+            )
         return device_time_us, float(spec.sample_period_s)
     if not steps.size:
         raise SourceDataError(f"{table.path}: one sample only; give --sample-period SECONDS")

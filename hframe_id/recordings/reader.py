@@ -199,6 +199,20 @@ _SAMPLE_SCHEMAS = {
 }
 
 
+#: How far the device clock's median step per sample may be from rig.sample_period_s.
+CLOCK_TOLERANCE = 0.1
+
+
+def clock_mismatch(period_s: float, device_time_us, sequence) -> float | None:
+    """The device clock's median step per sample [s] if it contradicts the declared sample
+    period ``period_s`` by more than CLOCK_TOLERANCE (e.g. 10 ms declared, samples 1 ms
+    apart: replayed or fitted at that period, every time would be wrong); else None."""
+    if len(sequence) < 2:
+        return None
+    step_s = float(np.median(np.diff(device_time_us) / np.diff(sequence))) * 1e-6
+    return step_s if abs(step_s / period_s - 1) > CLOCK_TOLERANCE else None
+
+
 def read_recording(path: str | os.PathLike) -> Recording:
     """Read, validate and return a recording (either sample schema).
 
@@ -283,6 +297,12 @@ def read_recording(path: str | os.PathLike) -> Recording:
 
     events = tuple(log.decoded(fmt.EVENT_TOPIC))
     aborted = any(e.get("kind") == "abort" for e in events)
+    step_s = clock_mismatch(float(sample_period_s), samples.device_time_us, sequence)
+    if step_s is not None:
+        raise LogFormatError(
+            f"{where}: rig.sample_period_s {sample_period_s:g} s does not match the device "
+            f"clock, whose samples are {step_s * 1e3:g} ms apart (device_time_us)"
+        )
     time_s = (samples.device_time_us - samples.device_time_us[0]) * 1e-6
     truth = _truth(log)
     if not log.complete:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from test_cli_hostile_files import _recording
 
 from hframe_id.cli import main
 
@@ -70,3 +71,22 @@ def test_import_infinite_counts_per_rev(work, capsys):
     argv = ["import", csv, *maps, "--counts-per-rev", "inf", "--variant", "x", "--out", "c.mcap"]
     _refused(argv, capsys, "--counts-per-rev", "inf")
     assert sorted(p.name for p in work.iterdir()) == ["counts.csv"]
+
+
+def test_import_sample_period_against_the_time_column(work, capsys):
+    csv = _counts_csv(work)
+    maps = ["--map", "time [s]=time:s", "--map", "u1 [V]=input:V:u1"]
+    maps += ["--map", "pos [counts]=output:counts:pos", "--counts-per-rev", "1000"]
+    argv = ["import", csv, *maps, "--sample-period", "0.01", "--variant", "x", "--out", "c.mcap"]
+    _refused(argv, capsys, "--sample-period", "0.01", "1 ms apart")
+    assert sorted(p.name for p in work.iterdir()) == ["counts.csv"]
+
+
+def test_recording_sample_period_against_the_device_clock(work, capsys):
+    def slower(i: int, message: dict) -> dict:  # device clock at 10 ms, 1 ms declared
+        return {**message, "device_time_us": message["device_time_us"] * 10}
+
+    rec = _recording(work / "clock.mcap", slower)
+    argv = ["simulate", "--params", H8, "--recording", rec, "--out", "s.csv"]
+    _refused(argv, capsys, "clock.mcap", "rig.sample_period_s 0.001", "10 ms apart")
+    assert sorted(p.name for p in work.iterdir()) == ["clock.mcap"]
