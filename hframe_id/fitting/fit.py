@@ -471,9 +471,8 @@ def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitRes
     )
     results = [(draws[0][0], first)]
     for label, start in draws[1:]:
-        if progress is not None:
-            progress(FitProgress(label, 0, math.nan, math.nan, math.nan, "fitting from it"))
-        results.append((label, _started_from(_fit_widening(recordings, start, options), initial)))
+        labelled = replace(options, progress=_labelled(progress, label)) if progress else options
+        results.append((label, _started_from(_fit_widening(recordings, start, labelled), initial)))
     outcomes = judged(results, Criterion.of(first, recordings))
     k = min(range(len(outcomes)), key=lambda i: outcomes[i].criterion)
     best = results[k][1]
