@@ -12,6 +12,7 @@ import warnings
 
 from hframe_id.cli.fit_command import resolve_dataset
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.errors import OptionError
 
 #: The defaults of ``ValidationOptions``, stated in --help without importing the validation
 #: (SciPy, CasADi); tests/cli/test_cli_help.py checks that they agree.
@@ -131,6 +132,11 @@ def run(args: argparse.Namespace) -> int:
     options = ValidationOptions(**given)
     parameter_sets = [load_parameter_file(path) for path in [args.fit, *args.params]]
     recordings = _read(args.recordings)
+    for name, recording in zip(args.recordings, recordings, strict=True):
+        if options.max_lag >= len(recording.time_s):
+            raise OptionError(
+                f"--max-lag {options.max_lag}: longer than {name} ({len(recording.time_s)} samples)"
+            )
     plot_dir = None
     if args.plot:
         names = plot_names([r.name() for r in recordings], labels_of(parameter_sets))

@@ -90,3 +90,9 @@ def test_recording_sample_period_against_the_device_clock(work, capsys):
     argv = ["simulate", "--params", H8, "--recording", rec, "--out", "s.csv"]
     _refused(argv, capsys, "clock.mcap", "rig.sample_period_s 0.001", "10 ms apart")
     assert sorted(p.name for p in work.iterdir()) == ["clock.mcap"]
+
+
+def test_validate_max_lag_longer_than_the_recording(work, capsys):
+    argv = ["validate", H8, REC, "--max-lag", "100000", "--plot", "plots"]
+    _refused(argv, capsys, "--max-lag", "100000", "1000 samples")
+    assert list(work.iterdir()) == []
