@@ -234,3 +234,18 @@ def test_json_says_how_each_record_started_and_what_the_fit_beat(tmp_path, capsy
     points = summary["known_points"]
     assert {"fit", "the start", "hframe-8-table4.1.yaml"} <= set(points)
     assert points["fit"] == min(points.values())
+
+
+def test_a_multistart_portfolio_reports_how_many_starts_reached_the_best(tmp_path, capsys):
+    """Matched data: from the start and two draws x/÷2 around it, every start reaches the
+    same optimum, and the summary, --json and the report say so."""
+    import json
+
+    argv = ["fit", str(DATA), "--out-dir", str(tmp_path), "--no-plots", "--json", "--starts", "3"]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    starts = json.loads(out)["starts"]
+    assert starts["reached_best"] == 3 and len(starts["outcomes"]) == 3
+    assert "multistart: 3 of 3 starts reached the best optimum" in err
+    (report,) = tmp_path.glob("*-report.md")
+    assert "multistart: 3 of 3 starts" in report.read_text()
