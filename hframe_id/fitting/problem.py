@@ -417,7 +417,8 @@ def build_problem(
 
     Raises ``FitError`` (before any solving) for: no recordings, mixed variants or rigs,
     unknown free parameter names (suggesting the nearest), a free parameter at zero (log
-    scale), bounds excluding the initial value, too few valid samples.
+    scale), bounds excluding the initial value, too few valid samples, an output with no
+    valid sample, a shooting interval not shorter than a record.
     """
     recordings = list(recordings)
     if not recordings:
@@ -520,6 +521,15 @@ def build_problem(
             )
     latency = dict(wanted.latency_samples)
     experiments = tuple(_prepare(rec, model, latency) for rec in recordings)
+    for e in experiments:
+        if options.shooting_interval >= len(e.valid):
+            raise FitError(
+                f"{e.name}: shooting interval of {options.shooting_interval} samples, but the "
+                f"record has {len(e.valid)} samples"
+            )
+        empty = [name for j, name in enumerate(outputs) if not e.valid[:, j].any()]
+        if empty:
+            raise FitError(f"{e.name}: no valid sample of output {', '.join(empty)}")
     std = np.array(
         [
             wanted.channel_std.get(name) or default_channel_std(recordings[0], name)

@@ -96,3 +96,19 @@ def test_validate_max_lag_longer_than_the_recording(work, capsys):
     argv = ["validate", H8, REC, "--max-lag", "100000", "--plot", "plots"]
     _refused(argv, capsys, "--max-lag", "100000", "1000 samples")
     assert list(work.iterdir()) == []
+
+
+def test_fit_shooting_interval_longer_than_the_record(work, capsys):
+    argv = ["fit", REC, "--shooting-interval", "100000", "--quiet", "--out-dir", "fits"]
+    _refused(argv, capsys, "4V_xmotion", "100000", "1000 samples")
+    assert list(work.iterdir()) == []
+
+
+def test_fit_channel_with_no_valid_sample(work, capsys):
+    def blind(i: int, message: dict) -> dict:  # the x laser never in range
+        return {**message, "laser_x_m": None, "laser_x_valid": False}
+
+    rec = _recording(work / "blind.mcap", blind)
+    argv = ["fit", rec, "--quiet", "--out-dir", "fits"]
+    _refused(argv, capsys, "blind", "no valid sample of output x")
+    assert sorted(p.name for p in work.iterdir()) == ["blind.mcap"]
