@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+
+from hframe_id.errors import ParameterFileError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -58,16 +61,30 @@ def format_text(report: dict) -> str:
     return "\n".join(lines)
 
 
+def _most_extreme(values: dict[str, float]) -> str:
+    """``name = value`` of the value farthest from 1 in orders of magnitude."""
+    name = max((n for n in values if values[n]), key=lambda n: abs(math.log10(abs(values[n]))))
+    return f"{name} = {values[name]:g}"
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id linearize``: the pole-zero report as text or JSON."""
+    import numpy as np
+
     from hframe_id.analysis.export import pole_zero_report
     from hframe_id.parameters import load_parameter_file
 
     params = load_parameter_file(args.file)
-    report = pole_zero_report(
-        params,
-        inputs=[args.input] if args.input else None,
-        outputs=[args.output] if args.output else None,
-    )
+    try:
+        report = pole_zero_report(
+            params,
+            inputs=[args.input] if args.input else None,
+            outputs=[args.output] if args.output else None,
+        )
+    except np.linalg.LinAlgError as err:
+        raise ParameterFileError(
+            f"{args.file}: no poles and zeros for these values ({err}); the most extreme is "
+            f"{_most_extreme(params.values)}"
+        ) from None
     print(json.dumps(report, indent=2) if args.json else format_text(report))
     return 0

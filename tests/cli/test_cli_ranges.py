@@ -112,3 +112,11 @@ def test_fit_channel_with_no_valid_sample(work, capsys):
     argv = ["fit", rec, "--quiet", "--out-dir", "fits"]
     _refused(argv, capsys, "blind", "no valid sample of output x")
     assert sorted(p.name for p in work.iterdir()) == ["blind.mcap"]
+
+
+@pytest.mark.parametrize("line", ["r [m]: 0.0194", "K_t [N m/A]: 0.023"])
+def test_linearize_extreme_parameter_values(work, capsys, line):
+    name = line.partition(":")[0]
+    path = work / "extreme.yaml"
+    path.write_text(H8.read_text().replace(line, f"{name}: 1.0e+300"))
+    _refused(["linearize", path], capsys, "extreme.yaml", "1e+300", name.split()[0])
