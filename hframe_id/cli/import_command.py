@@ -17,6 +17,8 @@ examples:
       --noise-std x=0.002:mm --variant my-axis --out run.mcap
   hframe-id import DATA_EMPS.mat --map t=time:s --map vir=input:V --map qm=output:m \\
       --map qg=signal:m --variant emps-axis --noise-std qm=estimate --out emps.mcap
+  hframe-id import servo.mat --map 'data(:,1)=time:s' --map 'data(:,2)=input:V:u' \
+      --map 'data(:,4)=output:rad/s:w' --variant my-rotor --out servo.mcap
 
 Every value is converted to SI at import (mm -> m, deg -> rad, counts -> rad with
 --counts-per-rev, ms -> s). The numeric 1x1 variables of a .mat file (gains, constants) are
@@ -45,7 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="SOURCE=ROLE:UNIT[:NAME]",
         help=f"column (CSV) or variable (.mat) SOURCE is one of {', '.join(ROLES)} (signal: "
         "recorded, not a model input or output) in UNIT, named NAME in the recording (default "
-        f"SOURCE); repeat for each column. Units: {', '.join(KNOWN_UNITS)}",
+        "SOURCE); repeat for each column. A column of a .mat matrix is 'data(:,3)' (MATLAB, "
+        "1-based) or 'data[:,2]' (NumPy, 0-based; the same column) and needs a NAME. Units: "
+        f"{', '.join(KNOWN_UNITS)}",
     )
     parser.add_argument("--out", required=True, metavar="PATH", help="the recording (.mcap)")
     add_force_option(parser)

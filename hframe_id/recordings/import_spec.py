@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from hframe_id.errors import OptionError
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import Channels
+from hframe_id.recordings.matrix_columns import parse_matrix_column
 from hframe_id.recordings.units import COUNTS, Unit, to_si
 
 #: What a mapped column can be.
@@ -34,10 +35,12 @@ class ColumnMap:
 
     Attributes
     ----------
-    source : column (CSV) or variable (.mat) name in the file.
+    source : column (CSV) or variable (.mat) name in the file, or a column of a .mat matrix:
+        ``data(:,3)`` (MATLAB, 1-based) or ``data[:,2]`` (NumPy, 0-based).
     role : ``time``, ``input``, ``output`` or ``signal`` (recorded, not a model input/output).
     unit : its unit in the file (``mm``, ``deg``, ``counts``, ``ms``, ...; see ``units``).
-    name : channel name in the recording (default: ``source``); unused for time.
+    name : channel name in the recording (default: ``source``; required for a matrix
+        column); unused for time.
     """
 
     source: str
@@ -60,6 +63,14 @@ class ColumnMap:
             raise OptionError(f"--map {text!r}: role {role!r} is not one of {', '.join(ROLES)}")
         if role == "time" and len(parts) == 3:
             raise OptionError(f"--map {text!r}: the time column has no channel NAME")
+        matrix = parse_matrix_column(source)
+        if matrix is not None and matrix.problem:
+            raise OptionError(f"--map {text!r}: {matrix.problem}")
+        if matrix is not None and role != "time" and len(parts) == 2:
+            raise OptionError(
+                f"--map {text!r}: a matrix column needs a channel NAME, e.g. "
+                f"{source}={role}:{unit}:{'u' if role == 'input' else 'y'}"
+            )
         return cls(source, role, unit, parts[2] if len(parts) == 3 else source)
 
     def __str__(self) -> str:

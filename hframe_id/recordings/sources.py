@@ -3,8 +3,10 @@
 A CSV file has one header line of column names (after any ``#`` comment lines) and one row
 per sample; the delimiter (``,``, ``;`` or tab) is taken from the header. Empty cells are
 missing values (NaN). A .mat file (MATLAB v4 to v7, read with ``scipy.io.loadmat``) has one
-variable per column, each a vector; its numeric 1x1 variables are the file's scalars (gains,
-constants). Every problem is a ``SourceDataError`` naming the file, the column and the value.
+variable per column, each a vector, or matrices whose columns are named ``data(:,3)``
+(MATLAB, 1-based) or ``data[:,2]`` (NumPy, 0-based); its numeric 1x1 variables are the
+file's scalars (gains, constants). Every problem is a ``SourceDataError`` naming the file,
+the column and the value.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from hframe_id.digests import sha256_file
 from hframe_id.errors import HframeIdError
+from hframe_id.recordings.matrix_columns import MatrixColumn, parse_matrix_column
 
 #: Why a MATLAB v7.3 file cannot be read, and what to do.
 _V73 = (
@@ -66,7 +69,15 @@ class SourceTable:
         )
 
     def column(self, name: str) -> np.ndarray:
-        """Column ``name`` as a float vector (NaN where a CSV cell is empty)."""
+        """Column ``name`` as a float vector (NaN where a CSV cell is empty).
+
+        In a .mat file, ``VAR(:,K)`` (1-based) and ``VAR[:,K]`` (0-based) name column K of
+        the matrix variable ``VAR`` (``matrix_columns``); a column or variable whose name is
+        literally ``name`` comes first.
+        """
+        matrix = parse_matrix_column(name) if self.format == "mat" else None
+        if name not in self.raw and matrix is not None:
+            return self._mat_matrix_column(matrix)
         if name not in self.raw:
             near = difflib.get_close_matches(name, list(self.raw), n=1)
             hint = f"; nearest: {near[0]!r}" if near else ""
@@ -89,19 +100,48 @@ class SourceTable:
                 ) from None
         return values
 
-    def _mat_column(self, name: str) -> np.ndarray:
+    def _mat_numeric(self, name: str, where: str = "") -> np.ndarray:
         value = self.raw[name]
         if not isinstance(value, np.ndarray) or value.dtype.kind not in "biuf":
             kind = value.dtype.name if isinstance(value, np.ndarray) else type(value).__name__
             raise SourceDataError(
-                f"{self.path}: variable {name!r} is not numeric (MATLAB class {kind})"
+                f"{self.path}: variable {name!r}{where} is not numeric (MATLAB class {kind})"
             )
+        return value
+
+    def _mat_column(self, name: str) -> np.ndarray:
+        value = self._mat_numeric(name)
         if value.ndim > 2 or min(value.shape, default=0) > 1:
             shape = "x".join(str(n) for n in value.shape)
             raise SourceDataError(
-                f"{self.path}: variable {name!r} is a {shape} matrix, not a vector"
+                f"{self.path}: variable {name!r} is a {shape} matrix, not a vector; name one "
+                f"of its columns as {name}(:,1) (MATLAB, 1-based) or {name}[:,0] (NumPy, "
+                "0-based)"
             )
         return value.astype(float).ravel()
+
+    def _mat_matrix_column(self, matrix: MatrixColumn) -> np.ndarray:
+        name, text = matrix.variable, matrix.text
+        if matrix.index is None:
+            raise SourceDataError(f"{self.path}: {text}: {matrix.problem}")
+        if name not in self.raw:
+            near = difflib.get_close_matches(name, list(self.raw), n=1)
+            hint = f"; nearest: {near[0]!r}" if near else ""
+            raise SourceDataError(
+                f"{self.path}: {text}: no variable {name!r}{hint} (has: {', '.join(self.raw)})"
+            )
+        value = self._mat_numeric(name, f" (in {text})")
+        shape = "x".join(str(n) for n in value.shape)
+        if value.ndim != 2:
+            raise SourceDataError(
+                f"{self.path}: {text}: variable {name!r} is a {shape} array, not a matrix"
+            )
+        if matrix.index >= value.shape[1]:
+            raise SourceDataError(
+                f"{self.path}: {text}: column index out of range; variable {name!r} is a "
+                f"{shape} matrix, whose {matrix.describe_range(value.shape[1])}"
+            )
+        return value[:, matrix.index].astype(float)
 
 
 def read_source(path: str | os.PathLike) -> SourceTable:
