@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
+from refusals import refused
 
 from hframe_id.cli import main
 from hframe_id.documents import MAX_ALIAS_NODES, MAX_DEPTH
@@ -21,21 +22,6 @@ ROOT = Path(__file__).resolve().parents[2]
 H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
 REC = ROOT / "datasets" / "4V_xmotion.mcap"
 SAMPLE_TOPIC = "/rig/sample"
-
-
-def _refused(argv: list, capsys, *named: str) -> str:
-    """Run ``argv``: exit status 2, exactly one short error line naming each of ``named``, no
-    traceback; the line."""
-    code = main([str(word) for word in argv])
-    err = capsys.readouterr().err
-    assert code == 2, err[:2000]
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), err[:2000]
-    assert len(lines[0]) < 400, lines[0][:2000]
-    for word in named:
-        assert str(word) in lines[0], lines[0]
-    return lines[0]
 
 
 def _parameter_file(path: Path, edit: Callable[[str], str]) -> Path:
@@ -99,7 +85,7 @@ def _listing(folder: Path) -> set[str]:
 def test_deeply_nested_yaml(work, capsys):
     path = work / "deep.yaml"
     path.write_text("notes: " + "[" * 100_000 + "]" * 100_000 + "\n")
-    _refused(["params", "check", path], capsys, path, f"nested deeper than {MAX_DEPTH} levels")
+    refused(["params", "check", path], capsys, path, f"nested deeper than {MAX_DEPTH} levels")
 
 
 def test_nesting_up_to_the_limit_is_read(work, capsys):
@@ -120,7 +106,7 @@ def test_yaml_alias_bomb_is_refused_in_one_short_line(work, capsys):
         lambda t: bomb + t.replace("format_version: '1.0'", "format_version: *h"),
     )
     assert path.stat().st_size < 3000
-    _refused(["params", "check", path], capsys, path, f"more than {MAX_ALIAS_NODES:,} values")
+    refused(["params", "check", path], capsys, path, f"more than {MAX_ALIAS_NODES:,} values")
 
 
 def test_a_few_aliases_are_fine(work, capsys):
@@ -142,7 +128,7 @@ def test_a_few_aliases_are_fine(work, capsys):
 )
 def test_a_key_given_twice_in_yaml(work, capsys, edit, key, lines):
     path = _parameter_file(work / "twice.yaml", edit)
-    _refused(["params", "show", path], capsys, path, key, lines)
+    refused(["params", "show", path], capsys, path, key, lines)
 
 
 def test_a_key_given_twice_in_a_manifest(work, capsys):
@@ -150,7 +136,7 @@ def test_a_key_given_twice_in_a_manifest(work, capsys):
     manifest.write_text("format_version: '1.0'\nfits: []\nfits: []\n")
     before = _listing(work)
     argv = ["batch", manifest, "--results", "r.parquet", "--workers", "1"]
-    _refused(argv, capsys, manifest, "'fits' given twice")
+    refused(argv, capsys, manifest, "'fits' given twice")
     assert _listing(work) == before
 
 
@@ -159,7 +145,7 @@ def test_a_huge_value_is_echoed_shortened(work, capsys):
     path = _parameter_file(
         work / "huge.yaml", lambda t: t.replace("k_l [N/m]: 13167.0", f"k_l [N/m]: '{huge}'")
     )
-    line = _refused(["params", "check", path], capsys, path, "k_l [N/m] must be a number")
+    line = refused(["params", "check", path], capsys, path, "k_l [N/m] must be a number")
     assert "..." in line and len(line) < len(str(path)) + 100 + MAX_SHOWN
 
 
@@ -167,7 +153,7 @@ def test_deeply_nested_plant_file(work, capsys):
     path = work / "plant.yaml"
     path.write_text("friction: " + "{a: " * 5_000 + "1" + "}" * 5_000 + "\n")
     argv = ["simulate", "--plant", path, "--step", "1,4", "--duration", "0.1", "--out", "s.csv"]
-    _refused(argv, capsys, path, "nested deeper")
+    refused(argv, capsys, path, "nested deeper")
     assert _listing(work) == {"plant.yaml"}
 
 
@@ -177,7 +163,7 @@ def test_deeply_nested_plant_file(work, capsys):
 def test_deeply_nested_json_sample(work, capsys):
     deep = b"[" * 100_000 + b"]" * 100_000
     path = _recording(work / "deep.mcap", lambda i, m: deep if i == 5 else m)
-    _refused(["inspect", path], capsys, path, "/rig/sample message 5", "nested deeper")
+    refused(["inspect", path], capsys, path, "/rig/sample message 5", "nested deeper")
 
 
 def test_a_key_given_twice_in_a_json_sample(work, capsys):
@@ -187,17 +173,17 @@ def test_a_key_given_twice_in_a_json_sample(work, capsys):
         return json.dumps(message)[:-1].encode() + b', "u1_V": 7.0}'
 
     path = _recording(work / "twice.mcap", twice)
-    _refused(["inspect", path], capsys, path, "/rig/sample message 3", "'u1_V' given twice")
+    refused(["inspect", path], capsys, path, "/rig/sample message 3", "'u1_V' given twice")
 
 
 @pytest.mark.parametrize("field", ["sequence", "device_time_us"])
 @pytest.mark.parametrize("offset", [2**63, 2**64, 10**30])
 def test_sample_integers_beyond_int64(work, capsys, field, offset):
     path = _recording(work / "big.mcap", lambda i, m: {**m, field: m[field] + offset})
-    _refused(["inspect", path], capsys, path, f"sample 0: {field}", str(offset))
+    refused(["inspect", path], capsys, path, f"sample 0: {field}", str(offset))
 
 
 def test_a_number_beyond_any_float(work, capsys):
     path = _recording(work / "big.mcap", lambda i, m: {**m, "u1_V": 10**400} if i == 2 else m)
-    line = _refused(["inspect", path], capsys, path, "sample 2: u1_V must be a number")
+    line = refused(["inspect", path], capsys, path, "sample 2: u1_V must be a number")
     assert "..." in line

@@ -9,6 +9,7 @@ import datetime as dt
 from pathlib import Path
 
 import pytest
+from refusals import refused
 
 from hframe_id.cli import main
 from hframe_id.fleet.store import ResultsStore
@@ -25,20 +26,6 @@ def _listing(folder: Path) -> dict[str, bytes | None]:
         str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None
         for p in folder.rglob("*")
     }
-
-
-def _refused(argv: list[str], capsys, *named: str) -> str:
-    """Run ``argv``: exit status 2, exactly one error line (naming each of ``named``), no
-    traceback; the line."""
-    code = main([str(word) for word in argv])
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), err
-    for word in named:
-        assert str(word) in lines[0], lines[0]
-    return lines[0]
 
 
 @pytest.fixture
@@ -82,23 +69,23 @@ BAD_FOLDERS = (("afile", "exists and is not a directory"), ("afile/sub", "afile 
 @pytest.mark.parametrize(("out", "problem"), BAD_FOLDERS)
 def test_fleet_report_out(results, work, capsys, out, problem):
     before = _listing(work)
-    _refused(["fleet", "report", results, "--out", out], capsys, "--out", out, problem)
+    refused(["fleet", "report", results, "--out", out], capsys, "--out", out, problem)
     assert _listing(work) == before
 
 
 @pytest.mark.parametrize(("out", "problem"), BAD_FOLDERS)
 def test_fleet_make_out(work, capsys, out, problem):
     before = _listing(work)
-    _refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", out], capsys, out, problem)
+    refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", out], capsys, out, problem)
     assert _listing(work) == before
 
 
 def test_fleet_make_refuses_a_folder_with_content_and_leaves_nothing_on_failure(work, capsys):
     (work / "full").mkdir()
     (work / "full" / "x").write_text("x")
-    _refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", "full"], capsys, "not empty")
+    refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", "full"], capsys, "not empty")
     before = _listing(work)
-    _refused(
+    refused(
         ["fleet", "make", "--rigs", "0", "--weeks", "2", "--out", "new/fleet"], capsys, "--rigs"
     )
     assert _listing(work) == before  # neither new/ nor a hidden staging folder
@@ -110,7 +97,7 @@ def test_fleet_report_replaces_an_earlier_report_only_with_force(results, work, 
     page = (out / "fleet-report.md").read_text()
     assert "![k_l](plots/k_l.png)" in page and (out / "plots" / "k_l.png").is_file()
     before = _listing(work)
-    _refused(
+    refused(
         ["fleet", "report", results, "--out", out, "--json"], capsys, "fleet-report.md", "--force"
     )
     assert _listing(work) == before
@@ -122,7 +109,7 @@ def test_simulate_plot_onto_a_folder_writes_no_csv(work, capsys):
     (work / "plots" / "open_loop.png").mkdir(parents=True)
     before = _listing(work)
     argv = ["simulate", "--params", H8, *STEP, "--out", "s.csv", "--plot", "plots"]
-    _refused(argv, capsys, "--plot", "open_loop.png", "is a directory")
+    refused(argv, capsys, "--plot", "open_loop.png", "is a directory")
     assert _listing(work) == before
 
 
@@ -131,7 +118,7 @@ def test_simulate_mcap_refused_before_the_csv(work, capsys):
     before = _listing(work)
     for mcap, problem in (("run.mcap", "exists already"), ("run.txt", ".mcap file name")):
         argv = ["simulate", "--params", H8, *STEP, "--out", "s.csv", "--mcap", mcap]
-        _refused(argv, capsys, mcap, problem)
+        refused(argv, capsys, mcap, problem)
         assert _listing(work) == before
 
 
@@ -141,7 +128,7 @@ def test_simulate_writes_its_outputs_together(work, capsys):
     assert main(argv) == 0
     assert sorted(_listing(work)) == ["afile", "plots", "plots/open_loop.png", "r.mcap", "s.csv"]
     before = _listing(work)
-    _refused(argv, capsys, "--out s.csv: exists already; pass --force to replace it")
+    refused(argv, capsys, "--out s.csv: exists already; pass --force to replace it")
     assert _listing(work) == before
     assert main([*argv, "--force"]) == 0
     assert sorted(_listing(work)) == sorted(before)  # replaced, no temporary left
@@ -152,14 +139,14 @@ def test_validate_plot_writes_both_pngs_or_none(work, capsys):
     blocker.mkdir(parents=True)
     before = _listing(work)
     argv = ["validate", H8, REC, "--horizon", "0", "--plot", "plots"]
-    _refused(argv, capsys, "--plot", blocker.relative_to(work), "is a directory")
+    refused(argv, capsys, "--plot", blocker.relative_to(work), "is a directory")
     assert _listing(work) == before
     blocker.rmdir()
     assert main([str(w) for w in argv]) == 0
     capsys.readouterr()
     written = sorted(_listing(work / "plots"))
     assert written == ["4V_xmotion-compare.png", blocker.name]
-    _refused(argv, capsys, "4V_xmotion-compare.png", "--force")
+    refused(argv, capsys, "4V_xmotion-compare.png", "--force")
 
 
 @pytest.mark.parametrize(
@@ -176,7 +163,7 @@ def test_an_existing_output_needs_force(work, capsys, argv, existing):
     (work / existing).parent.mkdir(exist_ok=True)
     (work / existing).write_text("precious\n")
     before = _listing(work)
-    _refused(argv, capsys, existing, "exists already; pass --force to replace it")
+    refused(argv, capsys, existing, "exists already; pass --force to replace it")
     assert _listing(work) == before
 
 
@@ -200,5 +187,5 @@ def test_batch_outputs_checked_before_any_fit(work, capsys, option, value, probl
     manifest.write_text("format_version: '1.0'\nfits: []\n")
     argv = ["batch", manifest, "--results", "r.parquet", "--workers", "1", option, value]
     before = _listing(work)
-    _refused(argv, capsys, option, value, problem)
+    refused(argv, capsys, option, value, problem)
     assert _listing(work) == before

@@ -7,28 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from refusals import refused
 from test_cli_hostile_files import _recording
-
-from hframe_id.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
 REC = ROOT / "datasets" / "4V_xmotion.mcap"
 RECORD = ["record", "--rig", "sim", "--params", H8, "--fast", "--out", "run.mcap"]
-
-
-def _refused(argv: list, capsys, *named: str) -> str:
-    """Run ``argv``: exit status 2, exactly one error line naming each of ``named``, no
-    traceback; the line."""
-    code = main([str(word) for word in argv])
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), err
-    for word in named:
-        assert str(word) in lines[0], lines[0]
-    return lines[0]
 
 
 @pytest.fixture
@@ -47,14 +32,14 @@ def work(tmp_path, monkeypatch) -> Path:
     ],
 )
 def test_record_option_out_of_range(work, capsys, extra, option, value):
-    _refused([*RECORD, *extra], capsys, option, value)
+    refused([*RECORD, *extra], capsys, option, value)
     assert list(work.iterdir()) == []
 
 
 def test_simulate_seed_and_sample_time(work, capsys):
     step = ["simulate", "--params", H8, "--step", "1,4", "--duration", "0.05", "--out", "s.csv"]
-    _refused([*step, "--mcap", "s.mcap", "--seed", "-1"], capsys, "--seed", "-1")
-    _refused([*step, "--sample-time", "inf"], capsys, "--sample-time", "inf")
+    refused([*step, "--mcap", "s.mcap", "--seed", "-1"], capsys, "--seed", "-1")
+    refused([*step, "--sample-time", "inf"], capsys, "--sample-time", "inf")
     assert list(work.iterdir()) == []
 
 
@@ -69,7 +54,7 @@ def test_import_infinite_counts_per_rev(work, capsys):
     maps = ["--map", "time [s]=time:s", "--map", "u1 [V]=input:V:u1"]
     maps += ["--map", "pos [counts]=output:counts:pos"]
     argv = ["import", csv, *maps, "--counts-per-rev", "inf", "--variant", "x", "--out", "c.mcap"]
-    _refused(argv, capsys, "--counts-per-rev", "inf")
+    refused(argv, capsys, "--counts-per-rev", "inf")
     assert sorted(p.name for p in work.iterdir()) == ["counts.csv"]
 
 
@@ -78,7 +63,7 @@ def test_import_sample_period_against_the_time_column(work, capsys):
     maps = ["--map", "time [s]=time:s", "--map", "u1 [V]=input:V:u1"]
     maps += ["--map", "pos [counts]=output:counts:pos", "--counts-per-rev", "1000"]
     argv = ["import", csv, *maps, "--sample-period", "0.01", "--variant", "x", "--out", "c.mcap"]
-    _refused(argv, capsys, "--sample-period", "0.01", "1 ms apart")
+    refused(argv, capsys, "--sample-period", "0.01", "1 ms apart")
     assert sorted(p.name for p in work.iterdir()) == ["counts.csv"]
 
 
@@ -88,19 +73,19 @@ def test_recording_sample_period_against_the_device_clock(work, capsys):
 
     rec = _recording(work / "clock.mcap", slower)
     argv = ["simulate", "--params", H8, "--recording", rec, "--out", "s.csv"]
-    _refused(argv, capsys, "clock.mcap", "rig.sample_period_s 0.001", "10 ms apart")
+    refused(argv, capsys, "clock.mcap", "rig.sample_period_s 0.001", "10 ms apart")
     assert sorted(p.name for p in work.iterdir()) == ["clock.mcap"]
 
 
 def test_validate_max_lag_longer_than_the_recording(work, capsys):
     argv = ["validate", H8, REC, "--max-lag", "100000", "--plot", "plots"]
-    _refused(argv, capsys, "--max-lag", "100000", "1000 samples")
+    refused(argv, capsys, "--max-lag", "100000", "1000 samples")
     assert list(work.iterdir()) == []
 
 
 def test_fit_shooting_interval_longer_than_the_record(work, capsys):
     argv = ["fit", REC, "--shooting-interval", "100000", "--quiet", "--out-dir", "fits"]
-    _refused(argv, capsys, "4V_xmotion", "100000", "1000 samples")
+    refused(argv, capsys, "4V_xmotion", "100000", "1000 samples")
     assert list(work.iterdir()) == []
 
 
@@ -110,7 +95,7 @@ def test_fit_channel_with_no_valid_sample(work, capsys):
 
     rec = _recording(work / "blind.mcap", blind)
     argv = ["fit", rec, "--quiet", "--out-dir", "fits"]
-    _refused(argv, capsys, "blind", "no valid sample of output x")
+    refused(argv, capsys, "blind", "no valid sample of output x")
     assert sorted(p.name for p in work.iterdir()) == ["blind.mcap"]
 
 
@@ -119,4 +104,4 @@ def test_linearize_extreme_parameter_values(work, capsys, line):
     name = line.partition(":")[0]
     path = work / "extreme.yaml"
     path.write_text(H8.read_text().replace(line, f"{name}: 1.0e+300"))
-    _refused(["linearize", path], capsys, "extreme.yaml", "1e+300", name.split()[0])
+    refused(["linearize", path], capsys, "extreme.yaml", "1e+300", name.split()[0])
