@@ -28,3 +28,16 @@ def x_step():
     """``x_step(params, seed, volts=4.0)``: a 0.4 s x-motion step of ``params`` from rest (50
     samples of pre-roll) recorded by the sim rig's sensors."""
     return _x_step
+
+
+@pytest.fixture(scope="module")
+def truth(table):
+    """Table 4.2 with k_l, M_cart and F_c_cart moved (-5 %, +10 %, -25 %): a plant the start
+    is near but not at."""
+    return table.replace_values(k_l=12500.0, M_cart=1.15, F_c_cart=0.3)
+
+
+@pytest.fixture(scope="module")
+def steps(truth, x_step):
+    """Two 0.4 s x-motion steps (+4 V and -4 V) of ``truth`` from rest."""
+    return [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]

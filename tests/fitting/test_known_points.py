@@ -10,16 +10,6 @@ from hframe_id.fitting.known_points import reference_sets, simulation_criterion
 FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
 
 
-@pytest.fixture(scope="module")
-def truth(table):
-    return table.replace_values(k_l=12500.0, M_cart=1.15, F_c_cart=0.3)
-
-
-@pytest.fixture(scope="module")
-def steps(truth, x_step):
-    return [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]
-
-
 def test_the_models_reference_files_are_known_points():
     labels = [label for label, _ in reference_sets("hframe-8")]
     assert labels == ["hframe-8-table4.1.yaml", "hframe-8-table4.2.yaml"]

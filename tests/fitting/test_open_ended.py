@@ -18,16 +18,6 @@ TIGHT = 1.001
 
 
 @pytest.fixture(scope="module")
-def truth(table):
-    return table.replace_values(k_l=12500.0, M_cart=1.15, F_c_cart=0.3)
-
-
-@pytest.fixture(scope="module")
-def steps(truth, x_step):
-    return [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]
-
-
-@pytest.fixture(scope="module")
 def start(truth):
     return truth.replace_values(k_l=1.05 * truth.values["k_l"])
 
