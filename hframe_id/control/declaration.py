@@ -33,6 +33,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import ControllerError, ModelError
+from hframe_id.models.declaration import check_name
 from hframe_id.models.spec import Signal
 from hframe_id.models.user import DeclaredSymbols
 
@@ -49,7 +50,6 @@ MAX_DELAY_SAMPLES = 100
 LAW_KEYS = ("commands", "states")
 #: The sample period the law is traced with when a declaration is checked [s].
 CHECK_PERIOD_S = 1e-3
-_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _SYMBOL = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
@@ -181,11 +181,7 @@ def _check_names(declaration: ControllerDeclaration) -> None:
 def check_declaration(declaration: ControllerDeclaration) -> None:
     """Check what needs no tracing of the law: names, units, values, timing, where the limits
     and disturbances act. Raises ``ControllerError`` naming the source and the item."""
-    if not isinstance(declaration.name, str) or not _NAME.match(declaration.name):
-        raise ControllerError(
-            f"{declaration.source}: controller name {declaration.name!r} must start with a "
-            "letter and hold only letters, digits, '-' and '_'"
-        )
+    check_name(declaration.name, f"{declaration.source}: controller name", ControllerError)
     if not declaration.commands:
         _fail(declaration, "declares no commands (the model inputs it computes)")
     _check_names(declaration)

@@ -106,16 +106,21 @@ def _check_unique(declaration: ModelDeclaration, what: str, names: list[str]) ->
         seen.add(name)
 
 
+def check_name(name: Any, what: str, error: type[ModelError]) -> None:
+    """A declared model's or controller's name: a letter, then letters, digits, '-' and '_'.
+    Raises ``error`` starting with ``what`` (the source and the kind of name)."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise error(
+            f"{what} {name!r} must start with a letter and hold only letters, digits, '-' and '_'"
+        )
+
+
 def check_declaration(declaration: ModelDeclaration) -> None:
     """Check the parts of a declaration that need no derivation (names, units, references).
 
     Raises ``ModelError`` naming the source and the offending item.
     """
-    if not isinstance(declaration.name, str) or not _NAME.match(declaration.name):
-        raise ModelError(
-            f"{declaration.source}: model name {declaration.name!r} must start with a letter "
-            "and hold only letters, digits, '-' and '_'"
-        )
+    check_name(declaration.name, f"{declaration.source}: model name", ModelError)
     if not declaration.coordinates:
         _fail(declaration, "declares no coordinates")
     if not declaration.outputs:
