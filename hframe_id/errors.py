@@ -41,6 +41,12 @@ class OptionError(HframeIdError):
     """A user-supplied option (command line or options dataclass) is out of range."""
 
 
+class Interrupted(KeyboardInterrupt):
+    """The user's Ctrl-C or a SIGTERM, as the command line's signal handler raises it
+    (``hframe_id.cli.signals``): told apart from a ``KeyboardInterrupt`` that a model or
+    controller file raises itself, which is that file's error."""
+
+
 #: The most characters of a value an error message shows (``shown``).
 MAX_SHOWN = 80
 

@@ -4,7 +4,8 @@ Each command module defines ``register(subparsers)``, which adds its parser and 
 ``handler`` to a function ``(args) -> int``. Errors derived from ``HframeIdError`` are printed
 as one line (``hframe-id: error: ...``) with exit status 2; nothing is printed from deep inside
 a library, and warnings reach the user as one line (``hframe-id: warning: ...``) without the
-source location Python adds.
+source location Python adds. Ctrl-C and SIGTERM end any command with one line and exit
+status 130, leaving no half-written output (``signals``).
 
 Only the module of the command being run is imported (``hframe-id --help`` imports none):
 every other command gets a placeholder parser that shows its line in the listing. Command
@@ -20,8 +21,11 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-from hframe_id.cli import model_files
+from hframe_id.cli import model_files, signals
 from hframe_id.errors import HframeIdError
+
+#: Exit status of a command ended by Ctrl-C or SIGTERM (128 + SIGINT, the shells' convention).
+EXIT_INTERRUPTED = 130
 
 #: The subcommands in the order ``hframe-id --help`` lists them: (name, module, one line of
 #: help). To add a command, write a module with ``register(subparsers)`` and add its line.
@@ -138,24 +142,32 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``hframe-id`` command: parse ``argv`` (default: the process's arguments), run the
     chosen subcommand and return its exit status (0 success, 1 a fit or check that failed,
-    2 bad input, reported in one line)."""
+    2 bad input, 130 Ctrl-C or SIGTERM, each reported in one line)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(chosen_command(argv))
     try:
-        args = parser.parse_args(argv)  # a numeric option out of range: OptionError
-        with warnings.catch_warnings():
-            warnings.showwarning = _one_line_warning
-            model_files.load(args)
-            return int(args.handler(args) or 0)
+        with signals.handled():
+            try:
+                args = parser.parse_args(argv)  # a numeric option out of range: OptionError
+                with warnings.catch_warnings():
+                    warnings.showwarning = _one_line_warning
+                    model_files.load(args)
+                    code = int(args.handler(args) or 0)
+                signals.check()  # a signal whose exception was lost in C code
+                return code
+            except Exception:
+                signals.check()  # the interrupt, come out of C code as another exception
+                raise
     except HframeIdError as err:
         print(f"hframe-id: error: {err}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:
-        print("hframe-id: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        detail = f": {err}" if str(err) else " (Ctrl-C)"
+        print(f"hframe-id: interrupted{detail}", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from hframe_id.atomic import Staging
+from hframe_id.cli import signals
 from hframe_id.errors import OptionError
 
 
@@ -111,11 +112,13 @@ def check_dir(
 @contextmanager
 def written_together() -> Iterator[Staging]:
     """A ``Staging`` for the outputs written in the block: put in place together when the
-    block ends normally, removed on any exception. An ``OSError`` while writing or placing
+    block ends normally (and no Ctrl-C or SIGTERM came meanwhile: ``signals.check``), removed
+    on any exception. An ``OSError`` while writing or placing
     them (a full disk, a folder changed meanwhile) is an ``OptionError`` naming the output."""
     staging = Staging()
     try:
         yield staging
+        signals.check()  # an interrupt lost in C code: nothing is put in place
         staging.commit()
     except OSError as err:
         where = staging.target_of(Path(err.filename)) if err.filename else "the outputs"

@@ -40,7 +40,7 @@ from hframe_id.control.declaration import (
 )
 from hframe_id.errors import ControllerError
 from hframe_id.models.spec import Signal
-from hframe_id.models.user import error_line, run_declaration_file
+from hframe_id.models.user import error_line, guarded, run_declaration_file
 
 
 def declare_controller(
@@ -91,10 +91,11 @@ def load_controller_file(path: str | Path) -> ControllerDeclaration:
             f"(found {type(declared).__name__})"
         )
     declared = replace(declared, source=str(path), controller_file=path)
-    try:
-        law_function(declared, CHECK_PERIOD_S)
-    except ControllerError:
-        raise
-    except Exception as err:
-        raise ControllerError(f"controller file {path}: law: {error_line(err, path)}") from None
+    with guarded(path, "controller file", ControllerError):
+        try:
+            law_function(declared, CHECK_PERIOD_S)
+        except (ControllerError, KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as err:
+            raise ControllerError(f"controller file {path}: law: {error_line(err, path)}") from None
     return declared

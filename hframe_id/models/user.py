@@ -18,9 +18,14 @@ same way as for the thesis's variants (``hframe_id.models.lagrange``).
 from __future__ import annotations
 
 import importlib.util
+import math
+import os
+import signal
 import sys
+import threading
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
@@ -28,7 +33,7 @@ from typing import Any
 
 import casadi as ca
 
-from hframe_id.errors import ModelError
+from hframe_id.errors import Interrupted, ModelError, shown
 from hframe_id.models.declaration import ModelDeclaration
 from hframe_id.models.lagrange import Friction, LagrangianSystem
 from hframe_id.models.options import ModelOptions
@@ -185,14 +190,101 @@ def error_line(err: BaseException, path: Path) -> str:
     return f"{type(err).__name__}{line}: {err}".splitlines()[0]
 
 
+#: Seconds a model or controller file may run while it is loaded (its import, and deriving
+#: its equations or tracing its law) before it counts as hanging; ``$HFRAME_ID_LOAD_TIMEOUT``
+#: overrides it (0: no limit).
+LOAD_TIMEOUT_S = 30.0
+
+
+class _LoadTimeout(BaseException):
+    """Raised into a file's code by the load timer (a BaseException, so that a file's
+    ``except Exception`` cannot swallow it)."""
+
+
+def load_timeout_s() -> float:
+    """The load timeout [s]: ``$HFRAME_ID_LOAD_TIMEOUT`` if set, else ``LOAD_TIMEOUT_S``.
+
+    Read at each load, like the native-code settings (``hframe_id.native.settings``): model
+    files are loaded by the command line, the Python API and Dask workers alike.
+    """
+    text = os.environ.get("HFRAME_ID_LOAD_TIMEOUT")
+    if text is None:
+        return LOAD_TIMEOUT_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise ModelError(f"HFRAME_ID_LOAD_TIMEOUT must be a number of seconds >= 0, got {text!r}")
+    return value
+
+
+@contextmanager
+def _timer(seconds: float) -> Iterator[None]:
+    """Raise ``_LoadTimeout`` in the block after ``seconds`` (0: never).
+
+    A real-time interval timer (``setitimer``) whose SIGALRM handler raises: Python runs the
+    handler between two bytecodes of the file's code, and a blocking call (``time.sleep``,
+    a socket read) is interrupted and not resumed (PEP 475: the handler's exception ends
+    it). Only the main thread receives signals, so elsewhere (a Dask worker's thread) and
+    on Windows the block runs without a limit; C code that never returns to Python (a
+    CasADi call that does not end) is not interrupted either. The previous handler and
+    timer are put back afterwards.
+    """
+    usable = hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+    if not (seconds > 0 and usable):
+        yield
+        return
+
+    def expire(signum: int, frame: object) -> None:
+        raise _LoadTimeout
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@contextmanager
+def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iterator[None]:
+    """Run a model or controller file's code (``kind``: ``"model file"``, ...) so that every
+    way it can end is one ``error`` naming the file: an exception (with the file's line),
+    ``sys.exit`` (any status, 0 too), a ``KeyboardInterrupt`` it raises itself, or running
+    longer than ``load_timeout_s()``. The user's own Ctrl-C or SIGTERM (``Interrupted``)
+    passes through, to end the command."""
+    seconds = load_timeout_s()
+    try:
+        with _timer(seconds):
+            yield
+    except ModelError as err:
+        message = str(err)
+        raise error(message if str(path) in message else f"{path}: {message}") from None
+    except _LoadTimeout:
+        raise error(
+            f"{kind} {path}: still running after {seconds:g} s (a loop or a wait at import?); "
+            "HFRAME_ID_LOAD_TIMEOUT sets the limit"
+        ) from None
+    except SystemExit as err:
+        raise error(f"{kind} {path}: calls sys.exit({shown(err.code)}) while loaded") from None
+    except Interrupted:
+        raise
+    except KeyboardInterrupt:
+        raise error(f"{kind} {path}: raises KeyboardInterrupt while loaded") from None
+    except Exception as err:
+        raise error(f"{kind} {path}: {error_line(err, path)}") from None
+
+
 def run_declaration_file(
     path: str | Path, kind: str, error: type[ModelError] = ModelError
 ) -> tuple[Path, ModuleType]:
     """Execute a model or controller file (``kind``: ``"model file"``, ``"controller file"``)
     as a module of its own; returns its resolved path and the module.
 
-    Every problem (no such file, not Python, any error while it runs) is one ``error`` line
-    naming the file, and the line of the file for a Python error.
+    Every problem (no such file, not Python, any way its code can end: ``guarded``) is one
+    ``error`` line naming the file, and the line of the file for a Python error.
     """
     path = Path(path).resolve()
     if not path.is_file():
@@ -202,13 +294,8 @@ def run_declaration_file(
     module_name = f"hframe_id_{kind.replace(' ', '_')}_{abs(hash(str(path)))}"
     spec = importlib.util.spec_from_file_location(module_name, path)
     module = importlib.util.module_from_spec(spec)
-    try:
+    with guarded(path, kind, error):
         spec.loader.exec_module(module)
-    except ModelError as err:
-        message = str(err)
-        raise error(message if str(path) in message else f"{path}: {message}") from None
-    except Exception as err:
-        raise error(f"{kind} {path}: {error_line(err, path)}") from None
     return path, module
 
 
@@ -238,11 +325,11 @@ def load_model_file(path: str | Path) -> ModelDeclaration:
             f"model file {path}: defines no MODEL = declare(...) (found {type(declared).__name__})"
         )
     declared = replace(declared, source=str(path), model_file=path)
-    try:
-        freeze(declared, ModelOptions())
-    except ModelError as err:
-        message = str(err)
-        raise ModelError(message if str(path) in message else f"{path}: {message}") from None
-    except Exception as err:
-        raise ModelError(f"model file {path}: deriving the equations failed: {err}") from None
+    with guarded(path, "model file"):
+        try:
+            freeze(declared, ModelOptions())
+        except (ModelError, KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as err:
+            raise ModelError(f"model file {path}: deriving the equations failed: {err}") from None
     return register(declared)

@@ -1,0 +1,95 @@
+"""Model and controller files loaded in a guarded way (issue 27, item 4): however a file's code
+ends while it is loaded (an exception, ``sys.exit`` with any status, a ``KeyboardInterrupt``
+of its own, or running past the load timeout) the command prints one ``hframe-id: error:``
+line naming the file, exits 2 and writes nothing."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from refusals import refused
+
+ROOT = Path(__file__).resolve().parents[2]
+EMPS_MODEL = ROOT / "models" / "emps_axis.py"
+EMPS_PARAMS = ROOT / "models" / "emps-idim-ls.yaml"
+
+#: Code a file runs at import, and a word the error line must carry.
+ENDINGS = {
+    "exit-0": ("import sys\nsys.exit(0)\n", "sys.exit(0)"),
+    "exit-3": ("import sys\nsys.exit(3)\n", "sys.exit(3)"),
+    "keyboard-interrupt": ("raise KeyboardInterrupt\n", "KeyboardInterrupt"),
+    "exception": ("x = 1\nraise RuntimeError('boom')\n", "RuntimeError (line 2): boom"),
+    "system-error": ("raise SystemError('from C')\n", "SystemError (line 1)"),
+}
+
+
+@pytest.mark.parametrize("ending", ENDINGS)
+def test_a_model_file_ending_at_import_is_one_line(tmp_path, capsys, ending):
+    code, word = ENDINGS[ending]
+    model = tmp_path / "model.py"
+    model.write_text(code)
+    refused(["models", "--model-file", model], capsys, "model file", model, word)
+
+
+@pytest.mark.parametrize("ending", ENDINGS)
+def test_a_controller_file_ending_at_import_is_one_line(tmp_path, capsys, ending):
+    code, word = ENDINGS[ending]
+    controller = tmp_path / "controller.py"
+    controller.write_text(code)
+    argv = ["control", "--params", EMPS_PARAMS, "--model-file", EMPS_MODEL]
+    argv += ["--controller", controller, "--reference", tmp_path / "none.mcap"]
+    refused(argv, capsys, "controller file", controller, word)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["controller.py"]
+
+
+def test_a_model_whose_equations_exit_is_one_line(tmp_path, capsys):
+    source = EMPS_MODEL.read_text()
+    assert "def equations(" in source
+    shutil.copy(EMPS_PARAMS, tmp_path)  # the model's reference file, beside it
+    model = tmp_path / "exits.py"
+    exits = "def equations(*args):\n    raise SystemExit(0)\n\n\ndef _equations("
+    model.write_text(source.replace("def equations(", exits, 1))
+    refused(["models", "--model-file", model], capsys, "model file", model, "sys.exit(0)")
+
+
+def test_a_bad_load_timeout_setting_is_one_line(tmp_path, capsys, monkeypatch):
+    model = tmp_path / "model.py"
+    model.write_text("x = 1\n")
+    monkeypatch.setenv("HFRAME_ID_LOAD_TIMEOUT", "soon")
+    refused(["models", "--model-file", model], capsys, "HFRAME_ID_LOAD_TIMEOUT", "soon")
+
+
+@pytest.mark.parametrize(
+    "code",
+    [
+        "while True:\n    pass\n",
+        # a wait whose interruption the file tries to swallow
+        "import time\ntry:\n    time.sleep(300)\nexcept Exception:\n    pass\n",
+    ],
+    ids=["busy-loop", "swallowing-sleep"],
+)
+def test_a_file_hanging_at_import_times_out(tmp_path, code):
+    # In a process of its own: the timer needs the main thread, which a pytest-xdist worker
+    # may not run tests on.
+    model = tmp_path / "hangs.py"
+    model.write_text(code)
+    env = {**os.environ, "HFRAME_ID_LOAD_TIMEOUT": "0.5"}
+    start = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "hframe_id", "models", "--model-file", str(model)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert time.monotonic() - start < 60  # generous: the limit is 0.5 s plus start-up
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: model file"), done.stderr
+    assert str(model) in lines[0] and "still running after 0.5 s" in lines[0]
