@@ -5,7 +5,8 @@ Called by ``fit_recordings`` for the parameters it held for identifiability; eac
 of :func:`hframe_id.fitting.designs.standard_designs` not already in the data is simulated at
 the fitted parameters (noise-free, through the rig's DAC and laser range), transcribed like
 the data, and its Gauss-Newton information added to the data's (docs/fitting.md,
-"Identifiability").
+"Identifiability"); the prediction is ``hframe_id.design.information``'s, which
+``hframe-id design`` optimises.
 """
 
 from __future__ import annotations
@@ -14,14 +15,14 @@ import math
 
 import numpy as np
 
+from hframe_id.design.information import reduced_information
 from hframe_id.errors import FitError
 from hframe_id.fitting.designs import standard_designs
 from hframe_id.fitting.options import FitOptions
-from hframe_id.fitting.problem import FitProblem, build_problem, rig_dac
+from hframe_id.fitting.problem import FitProblem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState
 from hframe_id.fitting.statistics import Statistics
-from hframe_id.recordings.recording import Recording
 
 
 def identifying_designs(
@@ -56,7 +57,7 @@ def identifying_designs(
     options = problem.options
     all_free = np.ones(len(problem.free), dtype=bool)
     jac, _, _ = gn.condensed_jacobian(state.evaluation, state.nodes, all_free)
-    info_data = _reduced_information(jac, ms.n_nuisance)
+    info_data = reduced_information(jac, ms.n_nuisance)
     ratio = 1.0
     if stats.relative_std_gn.size:
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -96,53 +97,14 @@ def identifying_designs(
     return advice
 
 
-def _reduced_information(jac: np.ndarray, n_nuisance: int) -> np.ndarray:
-    """Information J^T J about the parameters (the last columns of ``jac``) with the first
-    ``n_nuisance`` columns (initial states) eliminated: the Schur complement."""
-    info = jac.T @ jac
-    if not n_nuisance:
-        return info
-    a = info[:n_nuisance, :n_nuisance]
-    b = info[:n_nuisance, n_nuisance:]
-    return info[n_nuisance:, n_nuisance:] - b.T @ np.linalg.lstsq(a, b, rcond=None)[0]
-
-
 def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.ndarray):
-    """Reduced information about the free log-parameters of one candidate experiment."""
-    from hframe_id.recordings.sensors import SensorModel
-    from hframe_id.simulation.open_loop import simulate
+    """Reduced information about the free log-parameters of one candidate experiment, on
+    the data's rig (``hframe_id.design.information``)."""
+    from hframe_id.design.information import experiment_information
 
     rec0 = problem.experiments[0].recording
-    model = problem.model
-    rig = dict(rec0.rig)
-    sensors = SensorModel(
-        laser_min_m=float(rig.get("laser_min_m", -math.inf)),
-        laser_max_m=float(rig.get("laser_max_m", math.inf)),
-    )
-    dac = rig_dac(rig)
-    applied = design.inputs if dac is None else dac.dac(design.inputs)
-    states = simulate(model, p, applied, problem.sample_period_s, smoothing=problem.smoothing)
-    outputs = np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T
-    valid = np.ones_like(outputs, dtype=bool)
-    for j, s in enumerate(model.outputs):
-        if s.unit == "m":
-            valid[:, j] = (outputs[:, j] >= sensors.laser_min_m) & (
-                outputs[:, j] <= sensors.laser_max_m
-            )
-    rec = Recording(
-        variant=rec0.variant,
-        sample_period_s=problem.sample_period_s,
-        time_s=np.arange(outputs.shape[0]) * problem.sample_period_s,
-        inputs=design.inputs,
-        input_names=rec0.input_names,
-        outputs=np.where(valid, outputs, np.nan),
-        output_names=tuple(s.name for s in model.outputs),
-        valid=valid,
-        rig=rig,
-        experiment={"design": design.name},
-    )
     fitted = problem.initial.replace_values(
-        **{n: float(v) for n, v in zip(model.parameter_names, p, strict=True)}
+        **{n: float(v) for n, v in zip(problem.model.parameter_names, p, strict=True)}
     )
     options = FitOptions(
         free=problem.free_names,
@@ -151,10 +113,12 @@ def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.nd
         smoothing=problem.smoothing,
         threads=problem.options.threads,
     )
-    sub = build_problem([rec], fitted, options)
-    ms = MultipleShooting(sub)
-    nodes = np.array([states[k] for k in ms.window_start])
-    gn = GaussNewton(ms)
-    ev = ms.evaluate(nodes, np.zeros(len(sub.free)), sub.smoothing)
-    jac, _, _ = gn.condensed_jacobian(ev, nodes, np.ones(len(sub.free), dtype=bool))
-    return _reduced_information(jac, ms.n_nuisance)
+    info = experiment_information(
+        fitted,
+        [design.inputs],
+        options,
+        sample_period_s=problem.sample_period_s,
+        rig=rec0.rig,
+        names=[design.name],
+    )
+    return info.matrix
