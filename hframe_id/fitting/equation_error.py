@@ -20,8 +20,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from hframe_id.fitting.problem import FitProblem
-from hframe_id.fitting.problem import output_matrix as ms_output_matrix
+from hframe_id.fitting.problem import FitProblem, state_outputs
 
 #: Savitzky-Golay window [samples] and polynomial order for velocities and accelerations.
 SG_WINDOW = 5
@@ -137,9 +136,12 @@ def equation_error_start(
     vs = np.array(
         [problem.smoothing[0] if c.unit == "m" else problem.smoothing[1] for c in model.coordinates]
     )
-    # Only coordinates a sensor measures have equations (an unmeasured one, like the idler
-    # of the one-axis drive, is only filled in as belt-free motion: no dynamics to regress).
-    measured = np.any(ms_output_matrix(model)[:, :nq] != 0, axis=0)
+    # Only coordinates a sensor measures, by their position or their rate (a tachometer's,
+    # integrated into ``positions``), have equations (an unmeasured one, like the idler of
+    # the one-axis drive, is only filled in as belt-free motion: no dynamics to regress).
+    index = state_outputs(model)
+    measured = np.zeros(nq, dtype=bool)
+    measured[index[index >= 0] % nq] = True
     # Lasers (positions in m) are too noisy to differentiate over a few samples.
     windows = [SG_WINDOW_LASER if c.unit == "m" else SG_WINDOW for c in model.coordinates]
     data = []

@@ -290,20 +290,24 @@ def data_noise_std(recording: Recording, output: str) -> float:
     return sigma
 
 
-def default_channel_std(recording: Recording, output: str) -> float:
+def default_channel_std(recording: Recording, output: str, model: Model | None = None) -> float:
     """Noise std of an output channel [SI]: the rig's declaration (``noise_std_<output>``: a
-    value, or "estimate": ``data_noise_std``), else the H-frame rig's sensors (encoder
-    quantization, laser noise) from its metadata."""
+    value, or "estimate": ``data_noise_std``), else the sensor noise the ``model``'s
+    ``Output`` declares, else the H-frame rig's sensors (encoder quantization, laser noise)
+    from its metadata."""
     rig = recording.rig
     declared = recording.declared_noise_std(output)
     if declared == "estimate":
         return data_noise_std(recording, output)
     if declared is not None:
         return float(declared)
+    sensor = None if model is None else model.declaration.output_noise_std(output)
+    if sensor is not None:
+        return float(sensor)
     if output not in ENCODER_OUTPUTS + LASER_OUTPUTS:
         raise FitError(
             f"{recording.name()}: rig metadata declare no noise_std_{output}; give channel_std "
-            f"for {output}"
+            f"for {output} (or noise_std in the model's Output declaration)"
         )
     if output.startswith("phi"):
         counts = rig.get("encoder_counts_per_rev")
@@ -377,36 +381,51 @@ def _prepare(rec: Recording, model: Model, latency: dict[str, int]) -> Experimen
 
 
 def starts_at_rest(
-    outputs: np.ndarray, valid: np.ndarray, channel_std: np.ndarray, samples: int, dt: float
+    outputs: np.ndarray,
+    valid: np.ndarray,
+    channel_std: np.ndarray,
+    samples: int,
+    dt: float,
+    kinds: Sequence[str] | None = None,
 ) -> bool:
     """Whether a record shows rest at its start: per channel of ``outputs`` (N, n_y), y = a +
     b t + c t^2 fitted to its ``valid`` samples among the first ``samples``, and no |b| above
     ``REST_Z`` of its standard error (white noise of ``channel_std`` [SI]). A record cut in
     motion starts with a velocity (b); one at rest, or accelerating slowly from it, does
-    not. Too few samples to tell: at rest is not assumed."""
+    not. ``kinds`` (``output_kinds``, default all positions): a channel measuring a rate
+    shows rest by its value (|a| within ``REST_Z`` standard errors of 0); another function
+    of the state (a motor current) tells nothing and is not tested. Too few samples, or no
+    channel to tell: at rest is not assumed."""
+    kinds = kinds or ("position",) * outputs.shape[1]
     t = np.arange(min(samples, outputs.shape[0])) * dt
     design = np.stack([np.ones_like(t), t, t**2], axis=1)
-    for j in range(outputs.shape[1]):
+    tested = [j for j in range(outputs.shape[1]) if kinds[j] != "other"]
+    if not tested:
+        return False
+    for j in tested:
         used = valid[: t.size, j]
         if np.count_nonzero(used) <= design.shape[1]:
             return False
         a = design[used]
         coef, *_ = np.linalg.lstsq(a, outputs[: t.size, j][used], rcond=None)
-        std = channel_std[j] * math.sqrt(np.linalg.inv(a.T @ a)[1, 1])
-        if abs(coef[1]) > REST_Z * std:
+        term = 0 if kinds[j] == "rate" else 1
+        std = channel_std[j] * math.sqrt(np.linalg.inv(a.T @ a)[term, term])
+        if abs(coef[term]) > REST_Z * std:
             return False
     return True
 
 
-def _with_initial_state(experiment: Experiment, sensor_std: np.ndarray, options) -> Experiment:
+def _with_initial_state(
+    experiment: Experiment, sensor_std: np.ndarray, kinds: Sequence[str], options
+) -> Experiment:
     """``experiment`` marked at rest (``Experiment.at_rest``) per ``options.initial_state``:
     always ("rest"), never ("estimate"), or where its first ``REST_SAMPLES`` show rest with
-    the sensors' noise ``sensor_std`` [SI] ("auto"; the test ``hframe-id validate`` applies,
-    ``validation.replay.shows_rest``)."""
+    the sensors' noise ``sensor_std`` [SI] on channels of ``kinds`` (``output_kinds``)
+    ("auto"; the test ``hframe-id validate`` applies, ``validation.replay.shows_rest``)."""
     if options.initial_state != "auto":
         return replace(experiment, at_rest=options.initial_state == "rest")
     dt = float(experiment.recording.sample_period_s)
-    rest = starts_at_rest(experiment.outputs, experiment.valid, sensor_std, REST_SAMPLES, dt)
+    rest = starts_at_rest(experiment.outputs, experiment.valid, sensor_std, REST_SAMPLES, dt, kinds)
     return replace(experiment, at_rest=rest)
 
 
@@ -532,12 +551,13 @@ def build_problem(
             raise FitError(f"{e.name}: no valid sample of output {', '.join(empty)}")
     std = np.array(
         [
-            wanted.channel_std.get(name) or default_channel_std(recordings[0], name)
+            wanted.channel_std.get(name) or default_channel_std(recordings[0], name, model)
             for name in outputs
         ]
     )
-    sensor_std = np.array([default_channel_std(recordings[0], name) for name in outputs])
-    experiments = tuple(_with_initial_state(e, sensor_std, wanted) for e in experiments)
+    sensor_std = np.array([default_channel_std(recordings[0], name, model) for name in outputs])
+    kinds = output_kinds(model)
+    experiments = tuple(_with_initial_state(e, sensor_std, kinds, wanted) for e in experiments)
     quantization = np.array([encoder_step(recordings[0], name) for name in outputs])
     n_unknown = model.n_states * len(experiments) + len(free)
     n_valid = int(sum(e.valid.sum() for e in experiments))
@@ -588,14 +608,44 @@ def default_bounds(
     return value - factor * scale, value + factor * scale
 
 
-def output_matrix(model: Model) -> np.ndarray:
-    """C with y = C x (every model's outputs are coordinates, so the output map is linear)."""
+def output_matrix(model: Model, p: np.ndarray | None = None) -> np.ndarray:
+    """C = dy/dx (n_y, n_x) of the model's output map at x = 0, u = 0 and parameters ``p``
+    (SI, model order; default all 1): y = C x exactly where every output is a state (a
+    coordinate, a rate: ``state_outputs``), the output map's linearization otherwise."""
     x = ca.SX.sym("x", model.n_states)
-    y = model.output(x)
-    c = ca.jacobian(y, x)
-    if ca.depends_on(c, x):
-        raise FitError(f"{model.variant}: outputs are not linear in the state")
-    return np.array(ca.DM(c))
+    u = ca.SX.sym("u", model.n_inputs)
+    q = ca.SX.sym("p", len(model.parameters))
+    c = ca.Function("c", [x, u, q], [ca.jacobian(model.output_map(x, u, q), x)])
+    values = np.ones(len(model.parameters)) if p is None else p
+    return np.array(c(np.zeros(model.n_states), np.zeros(model.n_inputs), values))
+
+
+def state_outputs(model: Model) -> np.ndarray:
+    """(n_y,) the index of the state each output is (y_j = x_i: a coordinate, or a rate a
+    tachometer measures), -1 for an output that is any other function of (x, u, p)."""
+    x = ca.SX.sym("x", model.n_states)
+    u = ca.SX.sym("u", model.n_inputs)
+    p = ca.SX.sym("p", len(model.parameters))
+    y = model.output_map(x, u, p)
+    index = np.full(y.numel(), -1)
+    for j in range(y.numel()):
+        slope = ca.jacobian(y[j], ca.vertcat(x, u, p))
+        offset = ca.substitute(y[j], x, ca.SX.zeros(model.n_states))
+        if ca.depends_on(slope, ca.vertcat(x, u, p)) or not offset.is_zero():
+            continue
+        row = np.array(ca.evalf(slope)).ravel()
+        if np.count_nonzero(row) == 1 and row[: model.n_states].max() == 1.0:
+            index[j] = int(np.argmax(row))
+    return index
+
+
+def output_kinds(model: Model) -> tuple[str, ...]:
+    """Per output: ``"position"`` (a coordinate), ``"rate"`` (a coordinate's rate) or
+    ``"other"`` (any other function of the state, inputs and parameters)."""
+    nq = model.n_states // 2
+    return tuple(
+        "other" if i < 0 else "position" if i < nq else "rate" for i in state_outputs(model)
+    )
 
 
 def rigid_modes(model: Model, p: np.ndarray) -> np.ndarray:

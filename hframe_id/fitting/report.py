@@ -31,16 +31,16 @@ from hframe_id.fitting.fit import MISMATCH_RMS, FitResult
 from hframe_id.fitting.multistart import reached_best
 from hframe_id.fitting.problem import applied_inputs
 from hframe_id.fitting.report_figures import (
-    SCALE,
     ExperimentSignals,
     plot_correlation,
     plot_experiment,
+    shown_in,
 )
 from hframe_id.models import build_model, declaration
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.recordings.recording import Recording
-from hframe_id.simulation.open_loop import default_substeps, simulate
+from hframe_id.simulation.open_loop import default_substeps, outputs_of, simulate
 from hframe_id.validation.cross_validation import LeaveOneOutTable
 
 
@@ -202,7 +202,7 @@ def mismatch_rows(result: FitResult) -> list[tuple[str, ...]]:
         )
     ]
     for name, channel in result.diagnostics["noise"]["channels"].items():
-        scale, unit = SCALE[units[name]]
+        scale, unit = shown_in(units[name])
         rows.append(
             (
                 name,
@@ -306,7 +306,7 @@ def simulated_outputs(
             outputs.append(None)
             continue
         states = simulate(model, p, inputs, rec.sample_period_s, x0=x0, n_substeps=substeps)
-        outputs.append(np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T)
+        outputs.append(outputs_of(model, states[:-1], inputs, p))
     return outputs
 
 
@@ -507,7 +507,7 @@ def _signal_lines(
         rms = []
         for j, name in enumerate(rec.output_names):
             valid = rec.valid[:, j]
-            scale, unit = SCALE[units[name]]
+            scale, unit = shown_in(units[name])
             value = np.sqrt(np.mean((rec.outputs[valid, j] - fitted[valid, j]) ** 2))
             rms.append(f"{name} {scale * value:.3g} {unit}")
         lines += [f"### {rec.name()}", "", f"RMS residual: {', '.join(rms)}", ""]

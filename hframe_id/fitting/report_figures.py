@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-#: Display scale per output unit: angles in rad, positions in mm.
+#: Display scale per output unit: angles in rad, positions in mm (other units: SI, ``shown_in``).
 SCALE = {"rad": (1.0, "rad"), "m": (1e3, "mm")}
 RESIDUAL_SCALE = {"rad": (1e6, "urad"), "m": (1e6, "um")}
 #: Resolution of the report's PNGs [dots per inch].
@@ -24,12 +24,18 @@ DPI = 90
 PNG_OPTIONS = {"compress_level": 1}
 
 
+def shown_in(unit: str, scales: dict[str, tuple[float, str]] = SCALE) -> tuple[float, str]:
+    """(factor, unit) an output in SI ``unit`` is shown in: its entry of ``scales``
+    (``SCALE``, ``RESIDUAL_SCALE``), else the SI unit itself (a speed, a current)."""
+    return scales.get(unit, (1.0, unit))
+
+
 @dataclass(frozen=True)
 class ExperimentSignals:
     """What the figure of one experiment shows, in SI units.
 
     time_s : (N,) sample times [s].
-    names, units : the output channels and their SI units (``"rad"`` or ``"m"``).
+    names, units : the output channels and their SI units (``"rad"``, ``"m"``, ``"rad/s"``).
     measured : (N, n_y) measured outputs, NaN where a sample is not valid.
     fitted : (N, n_y) outputs simulated with the fitted parameters.
     reference : (N, n_y) the same with the reference set, or None.
@@ -77,8 +83,8 @@ def plot_experiment(signals: ExperimentSignals, label: str, path: Path) -> None:
     axes = fig.subplots(2, n, sharex=True, squeeze=False)
     t = signals.time_s
     for j, (name, unit) in enumerate(zip(signals.names, signals.units, strict=True)):
-        scale, shown = SCALE[unit]
-        rscale, rshown = RESIDUAL_SCALE[unit]
+        scale, shown = shown_in(unit)
+        rscale, rshown = shown_in(unit, RESIDUAL_SCALE)
         ax = axes[0, j]
         ax.plot(t, scale * signals.measured[:, j], "k.", ms=1.5, label="measured (valid)")
         ax.plot(t, scale * signals.fitted[:, j], "C0", lw=1.2, label="fitted")

@@ -5,7 +5,9 @@ state at the start of each window (a shooting node) is a decision variable, init
 the measurements. One evaluation integrates all windows of all experiments at once (one
 mapped CasADi call) and returns, for every window,
 
-- the weighted output residuals r = w (C x_k - y_k) of its samples (0 where invalid),
+- the weighted output residuals r = w (h(x_k, u_k, p) - y_k) of its samples (0 where
+  invalid), h the model's output map (``Model.output_map``; a selection of states where every
+  output is a coordinate or a rate),
 - their Jacobian with respect to the window's node state and the free log-parameters,
 - the state at the window's end and its Jacobian (A, B) for the continuity conditions
   x_end(node_i, p) = node_{i+1}.
@@ -34,7 +36,7 @@ from hframe_id.fitting.kernel import (
     window_function,
 )
 from hframe_id.fitting.options import TranscriptionOptions
-from hframe_id.fitting.problem import FitProblem, output_matrix, rigid_modes
+from hframe_id.fitting.problem import FitProblem, output_matrix, rigid_modes, state_outputs
 from hframe_id.simulation.integrators import (
     MIN_SUBSTEPS,
     RK4_STABILITY_LIMIT,
@@ -90,12 +92,16 @@ class MultipleShooting:
         self.nu = self.model.n_inputs
         self.ny = len(self.model.outputs)
         self.nf = len(problem.free)
-        self.c = output_matrix(self.model)
-        # Outputs are coordinates: y_j = x[index_j] (faster than multiplying by C).
-        unit_rows = np.all((self.c == 0) | (self.c == 1), axis=1) & (self.c.sum(axis=1) == 1)
-        self._output_index = np.argmax(self.c, axis=1) if unit_rows.all() else None
-        #: State rows whose sensitivities the residuals need (all where C mixes states).
-        self._sens_rows = self._output_index if unit_rows.all() else np.arange(self.nx)
+        #: dy/dx at the start (``output_matrix``): the output map where outputs are states.
+        self.c = output_matrix(self.model, problem.p_initial)
+        #: (n_y,) the state each output is, -1 for another function (``state_outputs``).
+        self.output_states = state_outputs(self.model)
+        selection = bool(np.all(self.output_states >= 0))
+        # Outputs are states: y_j = x[index_j] (no output map to evaluate).
+        self._output_index = self.output_states if selection else None
+        #: State rows whose sensitivities the residuals need (all for a general output map).
+        self._sens_rows = self.output_states if selection else np.arange(self.nx)
+        self._output_functions: dict[int, ca.Function] = {}
         self.threads = self.transcription.threads
         m = self.m
         exp_of, start, length = [], [], []
@@ -151,13 +157,7 @@ class MultipleShooting:
             True: compiled_windows(self.model, tuple(problem.free)),
             False: compiled_windows(self.model, None),
         }
-        # State scale for continuity defects: the noise of the channel measuring a coordinate
-        # (or the smallest channel noise), velocities that over one sample.
-        scale = np.full(self.nq, float(np.min(problem.channel_std)))
-        for j in range(self.ny):
-            q = int(np.argmax(np.abs(self.c[j, : self.nq])))
-            scale[q] = problem.channel_std[j]
-        self.defect_scale = np.concatenate([scale, scale / self.dt])
+        self.defect_scale = self._defect_scale()
         x = ca.SX.sym("x", self.nx)
         p = ca.SX.sym("p", len(self.model.parameters))
         s = ca.SX.sym("s", 2)
@@ -166,6 +166,26 @@ class MultipleShooting:
             [x, p, s],
             [ca.jacobian(self.model.dynamics(x, ca.DM.zeros(self.nu), p, s), x)],
         )
+
+    def _defect_scale(self) -> np.ndarray:
+        """(n_x,) state scale for continuity defects: a coordinate's, the noise of the channel
+        measuring its position (or the smallest channel noise), its velocity's that over one
+        sample; a coordinate measured only through its rate (a tachometer, a motor current)
+        takes that channel's noise divided by dy/dqdot for its velocity, that times the
+        sample period for its position."""
+        std = self.problem.channel_std
+        scale = np.full(self.nq, float(np.min(std)))
+        rate = np.full(self.nq, np.nan)
+        for j in range(self.ny):
+            cq, cv = np.abs(self.c[j, : self.nq]), np.abs(self.c[j, self.nq :])
+            if cq.any():
+                scale[int(np.argmax(cq))] = std[j] / cq.max()
+            elif cv.any():
+                rate[int(np.argmax(cv))] = std[j] / cv.max()
+        by_position = np.any(self.c[:, : self.nq] != 0, axis=0)
+        from_rate = ~by_position & np.isfinite(rate)
+        scale[from_rate] = rate[from_rate] * self.dt
+        return np.concatenate([scale, scale / self.dt])
 
     def subset(self, windows: np.ndarray, linked: bool = True) -> MultipleShooting:
         """The same transcription restricted to some windows (consecutive ones linked, or
@@ -248,11 +268,20 @@ class MultipleShooting:
 
         Positions: measured coordinates where valid; the others (and invalid samples) from
         the belt-free (rigid) motion fitted to the measured ones, weighted by their noise.
-        Velocities: central differences of the rigid-motion positions (encoder-dominated).
-        Returns nodes (W, n_x) and the velocity estimate (W, M + 1, n_q).
+        Velocities: central differences of the rigid-motion positions (encoder-dominated),
+        or a rate's measurement (a tachometer) where valid; a coordinate measured only
+        through its rate takes that rate's integral from 0 as its position. Outputs that are
+        other functions of the state (a motor current) do not enter. Returns nodes (W, n_x)
+        and the velocity estimate (W, M + 1, n_q).
         """
         modes = rigid_modes(self.model, p)
         cq = self.c[:, : self.nq]
+        index = self.output_states
+        position = (index >= 0) & (index < self.nq)
+        rate = index >= self.nq
+        integrated = np.zeros(self.nq, dtype=bool)
+        integrated[index[rate] - self.nq] = True
+        integrated[index[position]] = False
         nodes = np.zeros((self.n_windows, self.nx))
         velocity = np.zeros((self.n_windows, self.m + 1, self.nq))
         self.measured_positions: list[np.ndarray] = []
@@ -260,14 +289,18 @@ class MultipleShooting:
         self.measured_usable: list[np.ndarray] = []
         for e, exp in enumerate(self.problem.experiments):
             n = exp.n_samples
-            weights = exp.valid / self.problem.channel_std
+            weights = exp.valid / self.problem.channel_std * position
             y = np.where(exp.valid, exp.outputs, 0.0)
             rigid = self._rigid_fit(cq @ modes, modes, y, weights)
             positions = rigid.copy()
-            for j in range(self.ny):
-                q = int(np.argmax(np.abs(cq[j])))
-                positions[exp.valid[:, j], q] = exp.outputs[exp.valid[:, j], j]
+            for j in np.flatnonzero(position):
+                positions[exp.valid[:, j], index[j]] = exp.outputs[exp.valid[:, j], j]
             rates = np.gradient(rigid, self.dt, axis=0) if n > 1 else np.zeros_like(rigid)
+            for j in np.flatnonzero(rate):
+                rates[exp.valid[:, j], index[j] - self.nq] = exp.outputs[exp.valid[:, j], j]
+            for i in np.flatnonzero(integrated):
+                steps = 0.5 * (rates[1:, i] + rates[:-1, i]) * self.dt
+                rigid[:, i] = positions[:, i] = np.concatenate([[0.0], np.cumsum(steps)])
             self.measured_positions.append(positions)
             self.rigid_positions.append(rigid)
             self.measured_usable.append(np.all(exp.valid, axis=1))
@@ -518,7 +551,7 @@ class MultipleShooting:
         if self._output_index is not None:
             y = states_t[:, :m, self._output_index]
         else:
-            y = np.einsum("jx,wkx->wkj", self.c, states_t[:, :m])
+            y, h_x, h_p = self._output_map(states_t[:, :m], self.inputs[t], p)
         parts = {
             "residual": weight * (y - self.measured[t]),
             "jac_node": None,
@@ -537,7 +570,9 @@ class MultipleShooting:
         if self._output_index is not None:
             jac = sens_t * weight[..., None]
         else:
-            jac = np.einsum("jx,wkxd->wkjd", self.c, sens_t) * weight[..., None]
+            jac = np.einsum("wkjx,wkxd->wkjd", h_x, sens_t)
+            jac[..., nx:] += h_p[..., list(self.problem.free)]
+            jac *= weight[..., None]
         slopes = self.problem.parameter_slopes(p)  # d p / d theta
         end = out["end"][t]
         parts["jac_node"] = jac[..., :nx]
@@ -545,6 +580,37 @@ class MultipleShooting:
         parts["a_end"] = end[:, :, :nx]
         parts["b_end"] = end[:, :, nx:] * slopes
         return parts
+
+    def _output_map(self, states: np.ndarray, inputs: np.ndarray, p: np.ndarray):
+        """The model's output map at states (T, M, n_x) under inputs (T, M, n_u) [SI]:
+        y (T, M, n_y), dy/dx (T, M, n_y, n_x) and dy/dp (T, M, n_y, n_p), one mapped call."""
+        shape = states.shape[:2]
+        count = shape[0] * shape[1]
+        if count not in self._output_functions:
+            x = ca.SX.sym("x", self.nx)
+            u = ca.SX.sym("u", self.nu)
+            q = ca.SX.sym("p", len(self.model.parameters))
+            y = self.model.output_map(x, u, q)
+            jacobians = [ca.densify(ca.jacobian(y, v)) for v in (x, q)]
+            fn = ca.Function("output_jacobians", [x, u, q], [y, *jacobians])
+            self._output_functions[count] = fn.map(count, "serial")
+        y, h_x, h_p = self._output_functions[count](
+            states.reshape(count, self.nx).T,
+            inputs.reshape(count, self.nu).T,
+            np.repeat(p[:, None], count, axis=1),
+        )
+        n_p = len(p)
+        return (
+            np.array(y).T.reshape(*shape, self.ny),
+            np.array(h_x)
+            .reshape(self.ny, count, self.nx)
+            .transpose(1, 0, 2)
+            .reshape(*shape, self.ny, self.nx),
+            np.array(h_p)
+            .reshape(self.ny, count, n_p)
+            .transpose(1, 0, 2)
+            .reshape(*shape, self.ny, n_p),
+        )
 
     def defects(self, ev: Evaluation, nodes: np.ndarray, links=None) -> np.ndarray:
         """(W - 1, n_x) continuity defects x_end_i - node_{i+1}, scaled by the state scale;

@@ -10,7 +10,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 from hframe_id.models import hframe8, hframe20, one_axis
-from hframe_id.models.declaration import ModelDeclaration
+from hframe_id.models.declaration import ModelDeclaration, Output
 from hframe_id.models.lagrange import Friction, LagrangianSystem
 from hframe_id.models.model import Model, freeze
 from hframe_id.models.options import ModelOptions
@@ -30,6 +30,7 @@ __all__ = [
     "Model",
     "ModelDeclaration",
     "ModelOptions",
+    "Output",
     "ParameterSpec",
     "Signal",
     "build_model",

@@ -1,6 +1,7 @@
 """What a model variant is, in one place: the declaration every part of hframe-id reads.
 
-A declaration holds the variant's coordinates, inputs, measured outputs, parameters with units,
+A declaration holds the variant's coordinates, inputs, measured outputs (coordinates, or any
+signal that is a function of the state, inputs and parameters: ``Output``), parameters with units,
 its Lagrangian description (energies, actuation, friction-bearing coordinates; derived into
 equations of motion by ``hframe_id.models.lagrange``), its reference parameter file and the
 table it comes from, and which parameters a fit holds by default. The simulator, stick-slip
@@ -12,8 +13,9 @@ friction, the fitter, its report, linearization and export all take what they ne
 
 from __future__ import annotations
 
+import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,6 +37,35 @@ FIT_DEFAULT_KEYS = ("shooting_interval", "continuity")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _SYMBOL = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
+#: (q, qdot, u, p), each the declared names' CasADi symbols -> the output's value (a scalar
+#: expression or a number).
+OutputFunction = Callable[..., Any]
+
+
+@dataclass(frozen=True)
+class Output:
+    """A measured signal that is not a coordinate: y = function(q, qdot, u, p), in ``unit``.
+
+    ``function`` is called once, symbolically, with the same name-to-symbol maps as a model
+    file's ``equations`` (``q``, ``qdot``, ``u``, ``p``); the output is then one CasADi
+    expression in the graph of the dynamics, so a fit's Jacobians are exact. Examples: a
+    tachometer, ``Output("speed", "rad/s", "tachometer", lambda q, qd, u, p: qd["theta"])``; a
+    motor current (g V - K_e w) / R [A]. ``noise_std`` [``unit``] is the sensor's noise std,
+    the channel's weight in a fit unless the recording's rig metadata declare their own
+    (``noise_std_<name>``) or the fit is told (``channel_std``, ``--noise auto``).
+    """
+
+    name: str
+    unit: str
+    description: str
+    function: OutputFunction
+    noise_std: float | None = None
+
+    @property
+    def label(self) -> str:
+        """Name with unit, e.g. ``"speed [rad/s]"``."""
+        return f"{self.name} [{self.unit}]"
+
 
 @dataclass(frozen=True)
 class ModelDeclaration:
@@ -47,7 +78,8 @@ class ModelDeclaration:
     parameters : every parameter a parameter file of the variant may hold, with units.
     coordinates : generalized coordinates q (unit ``"m"`` or ``"rad"``).
     inputs : commanded inputs u, with units.
-    outputs : names of the measured coordinates, in the order of the output vector y.
+    outputs : the measured outputs, in the order of the output vector y: names of
+        coordinates (y_j = q_i), or ``Output`` declarations (any function of q, qdot, u, p).
     lagrangian : builds the energies, actuation and friction of the variant.
     reference_file : the variant's reference parameter file (the start of a fit, the column
         a fit report compares with), or None.
@@ -71,7 +103,7 @@ class ModelDeclaration:
     parameters: tuple[ParameterSpec, ...]
     coordinates: tuple[Signal, ...]
     inputs: tuple[Signal, ...]
-    outputs: tuple[str, ...]
+    outputs: tuple[str | Output, ...]
     lagrangian: LagrangianBuilder
     reference_file: Path | None = None
     reference_label: str = ""
@@ -88,6 +120,19 @@ class ModelDeclaration:
     def parameter_names(self) -> tuple[str, ...]:
         """Names of the model's parameters, in declaration order (the order of p)."""
         return tuple(spec.name for spec in self.parameters)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """Names of the outputs, in the order of y."""
+        return tuple(o.name if isinstance(o, Output) else o for o in self.outputs)
+
+    def output_noise_std(self, name: str) -> float | None:
+        """The sensor noise std [output unit] an ``Output`` declares, else None (coordinates:
+        the rig's sensors say)."""
+        for output in self.outputs:
+            if isinstance(output, Output) and output.name == name:
+                return output.noise_std
+        return None
 
     def default_free(self) -> tuple[str, ...]:
         """Parameters a fit estimates unless told otherwise: all but ``fixed`` and ``held``."""
@@ -144,10 +189,7 @@ def check_declaration(declaration: ModelDeclaration) -> None:
                 f"coordinate {coordinate.name!r} has unit {coordinate.unit!r}; a generalized "
                 f"coordinate is a position in {' or '.join(COORDINATE_UNITS)}",
             )
-    coordinates = [c.name for c in declaration.coordinates]
-    for output in declaration.outputs:
-        if output not in coordinates:
-            _fail(declaration, f"output {output!r} is not a coordinate ({', '.join(coordinates)})")
+    _check_outputs(declaration)
     for key, _ in declaration.fit_defaults:
         if key not in FIT_DEFAULT_KEYS:
             _fail(
@@ -161,6 +203,116 @@ def check_declaration(declaration: ModelDeclaration) -> None:
                 _fail(declaration, f"{what} parameter {name!r} is not declared")
     if declaration.reference_file is not None and not declaration.reference_file.is_file():
         _fail(declaration, f"reference parameter file {declaration.reference_file} does not exist")
+
+
+def _check_outputs(declaration: ModelDeclaration) -> None:
+    """Outputs are coordinate names or ``Output`` declarations with a unit, a function and a
+    positive noise std if any; no name twice, no ``Output`` named like a coordinate."""
+    coordinates = [c.name for c in declaration.coordinates]
+    for output in declaration.outputs:
+        if isinstance(output, str):
+            if output not in coordinates:
+                _fail(
+                    declaration,
+                    f"output {output!r} is not a coordinate ({', '.join(coordinates)}); declare "
+                    f"any other measured signal as Output({output!r}, unit, description, "
+                    "function)",
+                )
+            continue
+        if not isinstance(output, Output):
+            _fail(declaration, f"output {output!r} is neither a coordinate name nor an Output")
+        if not isinstance(output.name, str) or not _SYMBOL.match(output.name):
+            _fail(declaration, f"output name {output.name!r} is not an identifier")
+        if output.name in coordinates:
+            _fail(
+                declaration,
+                f"output {output.name!r} has the name of a coordinate; list the coordinate's "
+                f"name itself in outputs",
+            )
+        if not isinstance(output.unit, str) or not output.unit.strip():
+            _fail(declaration, f"output {output.name!r} has no unit (use '-' if dimensionless)")
+        if not callable(output.function):
+            _fail(declaration, f"output {output.name!r}: function must be callable (q, qdot, u, p)")
+        std = output.noise_std
+        if std is not None and not (
+            isinstance(std, int | float) and not isinstance(std, bool) and 0 < std < math.inf
+        ):
+            _fail(
+                declaration,
+                f"output {output.name!r}: noise_std must be > 0 and finite, got {std!r}",
+            )
+    _check_unique(declaration, "output", list(declaration.output_names))
+
+
+def output_expressions(
+    declaration: ModelDeclaration,
+    system: LagrangianSystem,
+    parameters: Mapping[str, ca.SX],
+    u: ca.SX,
+) -> ca.SX:
+    """The output vector y (SX, n_y) of a declaration on the symbols of its derived system:
+    a coordinate output is q_i, an ``Output`` its function of (q, qdot, u, p) by name.
+
+    Raises ``ModelError`` naming the output for a function that fails, uses an undeclared
+    name or symbol, returns something other than one value, or is not finite at q = qdot = 0,
+    u = 0 and every parameter 1 (a NaN or an infinity written into it).
+    """
+    from hframe_id.models.user import DeclaredSymbols
+
+    names = [c.name for c in system.coordinates]
+    entries = []
+    for output in declaration.outputs:
+        if not isinstance(output, Output):
+            entries.append(system.q[names.index(output)])
+            continue
+        where = f"{declaration.source}: model {declaration.name!r}: output {output.name!r}"
+        symbols = (
+            DeclaredSymbols("coordinate", {n: system.q[i] for i, n in enumerate(names)}, where),
+            DeclaredSymbols("rate", {n: system.qdot[i] for i, n in enumerate(names)}, where),
+            DeclaredSymbols(
+                "input", {s.name: u[i] for i, s in enumerate(declaration.inputs)}, where
+            ),
+            DeclaredSymbols("parameter", dict(parameters), where),
+        )
+        try:
+            value = output.function(*symbols)
+        except ModelError:
+            raise
+        except Exception as err:
+            raise ModelError(f"{where}: function failed: {type(err).__name__}: {err}") from None
+        entries.append(_output_entry(value, where, system, parameters, u))
+    return ca.vertcat(*entries)
+
+
+def _output_entry(
+    value: Any, where: str, system: LagrangianSystem, parameters: Mapping[str, ca.SX], u: ca.SX
+) -> ca.SX:
+    """One output's value as a scalar SX, checked (``output_expressions``)."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        value = ca.SX(float(value))
+    if not isinstance(value, ca.SX):
+        raise ModelError(
+            f"{where}: function must return one expression or number, got {type(value).__name__}"
+        )
+    if value.numel() != 1:
+        raise ModelError(
+            f"{where}: function must return one value, got a {value.size1()}x{value.size2()} "
+            "expression"
+        )
+    known = ca.vertcat(system.q, system.qdot, u, *parameters.values())
+    allowed = {s.name() for s in ca.symvar(known)}
+    unknown = sorted({s.name() for s in ca.symvar(value)} - allowed)
+    if unknown:
+        raise ModelError(f"{where}: uses undeclared symbol(s) {', '.join(unknown)}")
+    probe = ca.Function("probe", [known], [value])
+    point = [0.0] * (known.numel() - len(parameters)) + [1.0] * len(parameters)
+    result = float(probe(point))
+    if not math.isfinite(result):
+        raise ModelError(
+            f"{where}: is not finite ({result}) at q = qdot = 0, u = 0, parameters 1: a NaN or "
+            "an infinity in its expression"
+        )
+    return value
 
 
 def check_system(

@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import ModelError
-from hframe_id.models.declaration import ModelDeclaration, check_system
+from hframe_id.models.declaration import ModelDeclaration, Output, check_system, output_expressions
 from hframe_id.models.lagrange import Friction, LagrangianSystem, accelerations, mass_matrix
 from hframe_id.models.options import ModelOptions
 from hframe_id.models.spec import ParameterSpec, Signal
@@ -26,7 +26,11 @@ class Model:
     dynamics : ``ca.Function`` (x, u, p, s) -> xdot, with s = (v_s linear [m/s], v_s angular
         [rad/s]) the Coulomb smoothing velocities as a run-time input (used for continuation).
     f : ``ca.Function`` (x, u, p) -> xdot with s fixed at ``options.smoothing``.
-    output : ``ca.Function`` (x) -> y, the measured outputs.
+    output_map : ``ca.Function`` (x, u, p) -> y, the measured outputs (coordinates, or any
+        declared ``Output`` of the state, inputs and parameters): the one output map that
+        fitting, validation and simulation evaluate.
+    output : ``ca.Function`` (x) -> y, the same map where no output depends on u or p (every
+        coordinate output, a speed); None where one does (a motor current): use ``output_map``.
     energy : ``ca.Function`` (x, p) -> (T [J], V [J]).
     mass : ``ca.Function`` (p) -> M, the mass matrix d^2 T / dqdot^2 (constant in q here).
     actuation : ``ca.Function`` (x, u, p) -> Q_act, the generalized forces other than friction
@@ -45,7 +49,8 @@ class Model:
     coordinates: tuple[Signal, ...]
     dynamics: ca.Function
     f: ca.Function
-    output: ca.Function
+    output_map: ca.Function
+    output: ca.Function | None
     energy: ca.Function
     mass: ca.Function
     actuation: ca.Function
@@ -109,7 +114,7 @@ def freeze(declaration: ModelDeclaration, options: ModelOptions) -> Model:
     x = ca.vertcat(system.q, system.qdot)
     xdot = ca.vertcat(system.qdot, accelerations(system, p_sym, s))
     coordinate_names = [c.name for c in system.coordinates]
-    y = ca.vertcat(*(system.q[coordinate_names.index(name)] for name in declaration.outputs))
+    y = output_expressions(declaration, system, p_sym, u)
 
     dynamics = ca.Function("dynamics", [x, u, p, s], [xdot], ["x", "u", "p", "s"], ["xdot"])
     f = ca.Function(
@@ -120,7 +125,13 @@ def freeze(declaration: ModelDeclaration, options: ModelOptions) -> Model:
         Signal(f"{c.name}_dot", rate_units[c.unit], f"rate of {c.description}")
         for c in system.coordinates
     )
-    outputs = tuple(system.coordinates[coordinate_names.index(n)] for n in declaration.outputs)
+    outputs = tuple(
+        Signal(o.name, o.unit, o.description)
+        if isinstance(o, Output)
+        else system.coordinates[coordinate_names.index(o)]
+        for o in declaration.outputs
+    )
+    of_state = not ca.depends_on(y, ca.vertcat(u, p))
     return Model(
         variant=declaration.name,
         description=declaration.description,
@@ -132,7 +143,8 @@ def freeze(declaration: ModelDeclaration, options: ModelOptions) -> Model:
         coordinates=system.coordinates,
         dynamics=dynamics,
         f=f,
-        output=ca.Function("output", [x], [y], ["x"], ["y"]),
+        output_map=ca.Function("output_map", [x, u, p], [y], ["x", "u", "p"], ["y"]),
+        output=ca.Function("output", [x], [y], ["x"], ["y"]) if of_state else None,
         energy=ca.Function(
             "energy",
             [x, p],

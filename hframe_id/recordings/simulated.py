@@ -10,7 +10,7 @@ from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.sensors import SensorModel, measure_batch
-from hframe_id.simulation.open_loop import simulate
+from hframe_id.simulation.open_loop import outputs_of, simulate
 
 
 def simulate_recording(
@@ -37,14 +37,9 @@ def simulate_recording(
     model = build_model(params.variant)
     commanded = np.atleast_2d(np.asarray(voltages, dtype=float))
     applied = sensors.dac(commanded)
-    states = simulate(
-        model,
-        model.parameter_vector(params.values),
-        applied,
-        sample_period_s,
-        n_substeps=n_substeps,
-    )[:-1]
-    true_outputs = np.array(model.output.map(states.shape[0])(states.T)).T
+    p = model.parameter_vector(params.values)
+    states = simulate(model, p, applied, sample_period_s, n_substeps=n_substeps)[:-1]
+    true_outputs = outputs_of(model, states, applied, p)
     names = tuple(s.name for s in model.outputs)
     # Same random draws, in the same order, as the sample-by-sample sim rig (see sensors.py).
     outputs, valid = measure_batch(sensors, names, true_outputs, np.random.default_rng(seed))

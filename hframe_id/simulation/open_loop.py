@@ -114,6 +114,18 @@ def simulate(
     return np.vstack([x0, states])
 
 
+def outputs_of(model: Model, states: np.ndarray, inputs: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(K, n_y) the model's outputs (``Model.output_map``) at states (K, n_x) [SI] under
+    inputs (N, n_u) [V] and parameters ``p`` (SI, model order): the state at t_k with the
+    input held from t_k; states beyond the inputs (the final one) take the last input."""
+    states = np.atleast_2d(np.asarray(states, dtype=float))
+    inputs = np.atleast_2d(np.asarray(inputs, dtype=float)).reshape(-1, model.n_inputs)
+    k = states.shape[0]
+    held = inputs[np.minimum(np.arange(k), inputs.shape[0] - 1)]
+    outputs = model.output_map.map(k)(states.T, held.T, np.repeat(np.reshape(p, (-1, 1)), k, 1))
+    return np.array(outputs).T.reshape(k, -1)
+
+
 @dataclass(frozen=True)
 class SimulationResult:
     """Signals of one open-loop run at the sample instants (SI).
@@ -148,7 +160,7 @@ def run_open_loop(
     states = simulate(
         model, p, inputs, dt, n_substeps=n_substeps, friction=friction, compiled=compiled
     )
-    outputs = np.array(model.output.map(states.shape[0])(states.T)).T.reshape(states.shape[0], -1)
+    outputs = outputs_of(model, states, inputs, p)
     return SimulationResult(
         time_s=np.arange(states.shape[0]) * dt,
         inputs=np.atleast_2d(np.asarray(inputs, dtype=float)),

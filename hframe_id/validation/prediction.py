@@ -31,11 +31,12 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hframe_id.fitting.problem import output_matrix
+from hframe_id.fitting.problem import output_matrix, state_outputs
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.simulation.compiled import maybe_compile
 from hframe_id.simulation.integrators import rk4_function, stable_substeps
+from hframe_id.simulation.open_loop import outputs_of
 from hframe_id.validation.replay import Channels, measured_positions
 
 #: Default window of past samples for the state estimate (the fitter's shooting interval).
@@ -73,8 +74,26 @@ class _Windows:
         n_sub = stable_substeps(model, p, data.sample_period_s, model.options.smoothing)
         step, jacobian = _step_functions(model, n_sub, data.sample_period_s)
         self.step, self.jacobian = step.map(n_windows), jacobian.map(n_windows)
-        self.c = output_matrix(model)
+        #: dy/dx: the output map where every output is a state, else its linearization (exact
+        #: in x for outputs affine in the state, such as a motor current), for sensitivities
+        self.c = output_matrix(model, p)
+        self.of_states = bool(np.all(state_outputs(model) >= 0))
         self.starts = np.arange(n_windows)
+
+    def outputs(self, states: np.ndarray, first: np.ndarray) -> np.ndarray:
+        """(W, K, n_y) outputs of states (W, K, n_x) at samples ``first`` (W,) + 0 .. K - 1:
+        y = C x where every output is a state, else the model's output map under the
+        recording's inputs at those samples."""
+        if self.of_states:
+            return states @ self.c.T
+        rows = np.minimum(first[:, None] + np.arange(states.shape[1]), len(self.data.inputs) - 1)
+        flat = outputs_of(
+            self.model,
+            states.reshape(-1, self.model.n_states),
+            self.data.inputs[rows].reshape(-1, self.model.n_inputs),
+            self.p,
+        )
+        return flat.reshape(*states.shape[:2], -1)
 
     def simulate(self, x0: np.ndarray, samples: int) -> np.ndarray:
         """(W, samples + 1, n_x) states of every window from its initial state (W, n_x)."""
@@ -88,7 +107,7 @@ class _Windows:
         """(W, (m + 1) n_y) noise-weighted output errors over each window, 0 where invalid."""
         rows = self.starts[:, None] + np.arange(self.m + 1)
         error = (
-            states[:, : self.m + 1] @ self.c.T - self.data.measured[rows]
+            self.outputs(states[:, : self.m + 1], self.starts) - self.data.measured[rows]
         ) / self.data.noise_std
         return np.where(self.data.valid[rows], error, 0.0).reshape(self.w, -1)
 
@@ -198,5 +217,6 @@ def predict_ahead(
     windows = _Windows(model, p, data, window, n_windows)
     x0 = estimate_states(windows, _state_guess(model, p, data, n_windows))
     states = windows.simulate(x0, window + horizon)
-    predicted[window + horizon :] = states[:, -1] @ windows.c.T
+    last = windows.outputs(states[:, -1:], windows.starts + window + horizon)
+    predicted[window + horizon :] = last[:, 0]
     return predicted

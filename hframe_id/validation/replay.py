@@ -10,7 +10,10 @@ bridge and any unmeasured idler follow), averaged over the first ``REST_SAMPLES`
 record shows rest there; every velocity is zero. The fitter starts such a record from the
 same velocities (``FitOptions.initial_state``; its positions are estimated, within a
 sensor's resolution of these), so that a fit's residuals are what this replay of its
-parameter file shows.
+parameter file shows. A coordinate measured only through its rate (a tachometer) starts at 0
+with the measured rate as its velocity; outputs are the model's output map
+(``Model.output_map``) of the simulated states under the recording's inputs, whatever they
+measure (positions, speeds, a motor current).
 """
 
 from __future__ import annotations
@@ -23,14 +26,16 @@ from hframe_id.fitting.problem import (
     REST_SAMPLES,
     applied_inputs,
     default_channel_std,
+    output_kinds,
     output_matrix,
     rigid_modes,
     starts_at_rest,
+    state_outputs,
 )
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-from hframe_id.simulation.open_loop import simulate
+from hframe_id.simulation.open_loop import outputs_of, simulate
 
 
 @dataclass(frozen=True)
@@ -39,13 +44,14 @@ class Channels:
 
     Attributes
     ----------
-    names, units : output names and SI units (``phi1`` [rad], ``x`` [m], ...).
+    names, units : output names and SI units (``phi1`` [rad], ``x`` [m], ``speed`` [rad/s]).
     measured : (N, n_y) measurements, NaN where not valid.
     valid : (N, n_y) True where a sample may be used (``Recording.valid`` and finite).
     inputs : (N, n_u) voltages the plant saw [V] (after the DAC).
     input_names : names of the input columns (``u1``, ``u2``).
-    noise_std : (n_y,) sensor noise std from the rig metadata [rad or m]: weights of the
-        channels in state estimation.
+    noise_std : (n_y,) sensor noise std from the rig metadata or the model's ``Output``
+        declaration [SI]: weights of the channels in state estimation.
+    kinds : per channel, ``"position"``, ``"rate"`` or ``"other"`` (``output_kinds``).
     sample_period_s : sample period [s].
     """
 
@@ -57,6 +63,7 @@ class Channels:
     input_names: tuple[str, ...]
     noise_std: np.ndarray
     sample_period_s: float
+    kinds: tuple[str, ...] = ()
 
 
 def channels(model: Model, recording: Recording) -> Channels:
@@ -72,8 +79,9 @@ def channels(model: Model, recording: Recording) -> Channels:
         valid=valid,
         inputs=applied_inputs(recording),
         input_names=tuple(s.name for s in model.inputs),
-        noise_std=np.array([default_channel_std(recording, name) for name in names]),
+        noise_std=np.array([default_channel_std(recording, name, model) for name in names]),
         sample_period_s=float(recording.sample_period_s),
+        kinds=output_kinds(model),
     )
 
 
@@ -81,7 +89,8 @@ def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarra
     """(N, n_q) belt-free coordinates [m or rad] at every sample from the measurements alone.
 
     Per sample, the amplitudes of the rigid (belt-free) motions are fitted to the valid
-    outputs, weighted by the sensor noise; the belts are taken unstretched. Not the raw
+    position outputs (coordinates), weighted by the sensor noise; the belts are taken
+    unstretched; outputs of other kinds (rates, currents) place nothing. Not the raw
     measurements: a laser's noise (5 um) taken as a belt stretch would move a motor by
     5 um / r ~ 2.6e-4 rad, 50 encoder steps, once released. A sample with fewer valid outputs
     than rigid modes keeps the previous sample's positions (zero at the start).
@@ -89,10 +98,12 @@ def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarra
     nq = model.n_states // 2
     c = output_matrix(model)[:, :nq]
     modes = rigid_modes(model, p)
-    y = np.where(data.valid, data.measured, 0.0)
+    index = state_outputs(model)
+    placing = data.valid & ((index >= 0) & (index < nq))[None, :]
+    y = np.where(placing, data.measured, 0.0)
     positions = np.zeros((y.shape[0], nq))
-    enough = np.count_nonzero(data.valid, axis=1) >= modes.shape[1]
-    patterns, group = np.unique(data.valid, axis=0, return_inverse=True)
+    enough = np.count_nonzero(placing, axis=1) >= modes.shape[1]
+    patterns, group = np.unique(placing, axis=0, return_inverse=True)
     for g, used in enumerate(patterns):
         ks = np.flatnonzero((group.ravel() == g) & enough)
         if ks.size:
@@ -109,18 +120,25 @@ def shows_rest(data: Channels) -> bool:
     """Whether the record shows rest over its first ``REST_SAMPLES``
     (``fitting.problem.starts_at_rest`` with the sensors' noise)."""
     return starts_at_rest(
-        data.measured, data.valid, data.noise_std, REST_SAMPLES, data.sample_period_s
+        data.measured, data.valid, data.noise_std, REST_SAMPLES, data.sample_period_s, data.kinds
     )
 
 
 def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
     """(n_x,) state at rest (velocities zero, belts unstretched) at the measured positions:
     the mean over the first ``REST_SAMPLES`` where the record shows rest there
-    (``shows_rest``; a laser's noise averaged down by sqrt(10)), else the first sample's."""
+    (``shows_rest``; a laser's noise averaged down by sqrt(10)), else the first sample's. A
+    rate a channel measures (a tachometer) starts at its measurement, averaged the same way
+    (zero within its noise at rest)."""
     rest = shows_rest(data)
     positions = measured_positions(model, p, data)
     x0 = np.zeros(model.n_states)
     x0[: model.n_states // 2] = positions[:REST_SAMPLES].mean(axis=0) if rest else positions[0]
+    index = state_outputs(model)
+    for j in np.flatnonzero(index >= model.n_states // 2):
+        used = data.valid[: REST_SAMPLES if rest else 1, j]
+        if used.any():
+            x0[index[j]] = float(np.mean(data.measured[: used.size, j][used]))
     return x0
 
 
@@ -133,7 +151,7 @@ def simulate_channels(
     Returns
     -------
     data : the measured channels (``Channels``).
-    simulated : (N, n_y) simulated outputs [rad or m] at the sample instants, from rest at the
+    simulated : (N, n_y) simulated outputs [SI] at the sample instants, from rest at the
         first measured positions under the recording's DAC voltages (zero-order hold).
     """
     model = build_model(params.variant)
@@ -141,4 +159,4 @@ def simulate_channels(
     data = channels(model, recording)
     start = rest_state(model, p, data) if x0 is None else x0
     states = simulate(model, p, data.inputs, data.sample_period_s, x0=start)[:-1]
-    return data, states @ output_matrix(model).T
+    return data, outputs_of(model, states, data.inputs, p)
