@@ -15,7 +15,15 @@ source, the compiler (path and version), the flags, the CasADi version and the h
 ``-march=native`` resolves from), so a changed input never loads a stale library. Libraries
 are written atomically (concurrent processes never see half a file); when the folder grows
 beyond ``MAX_CACHE_BYTES`` the least recently used are deleted, and ``hframe-id cache clear``
-empties it.
+empties it. The cache heals itself: a cached library that does not load (cut short, emptied,
+overwritten) is built again, once; if that one does not load either, CasADi evaluates (one
+warning, as below). A cache folder that cannot be used (``$HFRAME_ID_CACHE`` names a file,
+or a folder that cannot be made or written) costs one ``NativeCacheWarning`` line: the
+libraries then go to a private folder of the process, removed when it exits.
+
+A compile that takes more than two seconds is announced on the ``hframe_id.native`` logger, which
+the command line shows as a progress line on stderr (not with ``--quiet``); Ctrl-C or
+SIGTERM while the compiler runs kills its whole process group before the command ends.
 
 Without a working compiler nothing fails: ``build`` and ``compile_function`` return None, and
 the first such failure in a process is reported by one ``NativeCodeWarning`` line; callers
@@ -24,7 +32,10 @@ then evaluate with CasADi's own virtual machine (same results, slower).
 
 from __future__ import annotations
 
+import atexit
+import ctypes
 import hashlib
+import logging
 import os
 import platform
 import shutil
@@ -39,6 +50,8 @@ from pathlib import Path
 
 import casadi as ca
 
+logger = logging.getLogger(__name__)
+
 #: Seconds one compiler run may take before it counts as failed (the largest simulator, a
 #: map over 10^5 samples, takes about 20 s on a loaded 2-core machine).
 COMPILE_TIMEOUT_S = 600
@@ -46,12 +59,19 @@ COMPILE_TIMEOUT_S = 600
 MAX_CACHE_BYTES = 512 * 2**20
 #: Flags every shared library needs.
 LIBRARY_FLAGS = ("-fPIC", "-shared")
+#: Seconds after which a compile still running is announced (``logger``, INFO): the largest
+#: sources (570 kB of C, an hframe-20 fit's window loop) take 4-5 s on a loaded 2-core machine.
+ANNOUNCE_AFTER_S = 2.0
 #: Folders of the two caches this module replaced (``cache clear`` removes them too).
 _LEGACY_FOLDERS = ("casadi", "kernels")
 
 
 class NativeCodeWarning(RuntimeWarning):
     """Native code could not be built; CasADi's virtual machine evaluates instead (slower)."""
+
+
+class NativeCacheWarning(RuntimeWarning):
+    """The cache folder cannot be used; compiled code is kept for this process only."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +84,7 @@ class CacheInfo:
 
 
 _warned = False
+_private: Path | None = None  # this process's folder when the cache folder is unusable
 
 
 @dataclass(frozen=True)
@@ -77,8 +98,9 @@ class NativeSettings:
 def settings() -> NativeSettings:
     """The user's settings for native code, read from the environment at each call.
 
-    This is the only function below the command line that reads environment variables, and
-    it reads only these three on purpose:
+    With ``hframe_id.models.user.load_timeout_s`` (``HFRAME_ID_LOAD_TIMEOUT``), this is one
+    of the two functions below the command line that read environment variables, and it
+    reads only these three on purpose:
 
     - ``CC`` (compiler; else ``cc``, else ``gcc``) and ``XDG_CACHE_HOME`` (cache base; else
       ``~/.cache``) are the platform's conventions, which every tool that compiles or caches
@@ -115,6 +137,41 @@ def cache_root() -> Path:
 def cache_directory() -> Path:
     """Where compiled libraries live (``cache_root() / "native"``)."""
     return cache_root() / "native"
+
+
+def unusable(folder: Path) -> str | None:
+    """Why ``folder`` cannot hold the cache (one line: it, or a folder above it, is a file;
+    it cannot be made or written), or None if it can. Makes the folder."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        return f"{folder}: {err.strerror or err}"
+    return None
+
+
+def _library_folder() -> Path:
+    """``cache_directory()``, or where it cannot be used (``$HFRAME_ID_CACHE`` names a file
+    or a folder that cannot be written), a private folder of this process, removed when it
+    exits, after one ``NativeCacheWarning``: native code still runs, built afresh in each
+    process."""
+    folder = cache_directory()
+    reason = unusable(folder)
+    if reason is None:
+        return folder
+    global _private
+    if _private is None:
+        _private = Path(tempfile.mkdtemp(prefix="hframe-id-native-"))
+        atexit.register(shutil.rmtree, _private, ignore_errors=True)
+        warnings.warn_explicit(
+            f"cache folder unusable ({reason}); compiled code is not kept after this run",
+            NativeCacheWarning,
+            "hframe-id",
+            0,
+            module="hframe_id.native",
+        )
+    return _private
 
 
 @lru_cache(maxsize=4)
@@ -196,7 +253,14 @@ def _warn_once(reason: str) -> None:
 
 def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -> str | None:
     """Compile ``source`` with ``flags`` into ``library`` (atomically); the reason as one
-    line if the compiler fails or times out, else None."""
+    line if the compiler fails or times out, else None.
+
+    The compiler runs in a session of its own: on a timeout, Ctrl-C or SIGTERM (any
+    exception while waiting) the whole group (driver, cc1, as, ld) is killed, not only the
+    driver, whose children would otherwise run on; the terminal's Ctrl-C does not reach the
+    group itself, so it is killed here, before the exception goes on. A compile still running
+    after ``ANNOUNCE_AFTER_S`` is announced (``logger``, INFO).
+    """
     library.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
         c_file = Path(scratch) / "source.c"
@@ -204,8 +268,6 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
         built = Path(scratch) / library.name
         command = [path, *flags, *LIBRARY_FLAGS, str(c_file), "-o", str(built), "-lm"]
         try:
-            # A session of its own: on a timeout the whole group (driver, cc1, as, ld) is
-            # killed, not only the driver, whose children would otherwise run on.
             process = subprocess.Popen(
                 command,
                 stdout=subprocess.PIPE,
@@ -216,17 +278,40 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
         except OSError as err:
             return f"{Path(path).name}: {err}"
         try:
-            _, stderr = process.communicate(timeout=COMPILE_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
+            try:
+                _, stderr = process.communicate(timeout=min(ANNOUNCE_AFTER_S, COMPILE_TIMEOUT_S))
+            except subprocess.TimeoutExpired:
+                if COMPILE_TIMEOUT_S <= ANNOUNCE_AFTER_S:
+                    raise
+                logger.info(
+                    "compiling %s (%d kB of C) to native code, once: it is kept in %s",
+                    library.name.rsplit("-", 1)[0],
+                    len(source) // 1000,
+                    library.parent,
+                )
+                _, stderr = process.communicate(timeout=COMPILE_TIMEOUT_S - ANNOUNCE_AFTER_S)
+        except BaseException as err:
             os.killpg(process.pid, signal.SIGKILL)
             process.communicate()
-            return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
+            if isinstance(err, subprocess.TimeoutExpired):
+                return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
+            raise
         if process.returncode != 0:
             errors = [line for line in stderr.splitlines() if "error" in line]
             detail = (errors or stderr.splitlines() or ["no message"])[0]
             return f"{Path(path).name} failed: {detail.strip()}"
         os.replace(built, library)
     return None
+
+
+def _loads(library: Path) -> bool:
+    """True if ``library`` loads as a shared library (a file cut short, emptied or
+    overwritten does not: it is then rebuilt)."""
+    try:
+        ctypes.CDLL(str(library))
+    except OSError:
+        return False
+    return True
 
 
 def _stat(path: Path) -> tuple[float, int]:
@@ -238,11 +323,11 @@ def _stat(path: Path) -> tuple[float, int]:
     return status.st_mtime, status.st_size
 
 
-def _prune(keep: Path) -> None:
-    """Delete the least recently used libraries while the cache exceeds ``MAX_CACHE_BYTES``
-    (never ``keep``). A library loaded by a running process stays usable: it is unlinked,
-    not overwritten."""
-    libraries = sorted((*_stat(f), f) for f in cache_directory().glob("*.so"))
+def _prune(folder: Path, keep: Path) -> None:
+    """Delete the least recently used libraries of ``folder`` while they exceed
+    ``MAX_CACHE_BYTES`` (never ``keep``). A library loaded by a running process stays
+    usable: it is unlinked, not overwritten."""
+    libraries = sorted((*_stat(f), f) for f in folder.glob("*.so"))
     total = sum(size for _, size, _ in libraries)
     for _, size, library in libraries:
         if total <= MAX_CACHE_BYTES:
@@ -258,25 +343,34 @@ def build(
     """The shared library of C ``source``, built once and cached (see the module docstring).
 
     ``flags`` are always used; ``native_flags`` are tried first and dropped if that build
-    fails. Returns the library's path, or None (after one ``NativeCodeWarning`` per process)
-    if no compiler runs or it fails.
+    fails. A cached library that does not load (cut short, emptied, overwritten) is deleted
+    and built again, once. Returns the library's path, or None (after one
+    ``NativeCodeWarning`` per process) if no compiler runs, it fails, or what it built does
+    not load either.
     """
     identity = compiler()
     if identity is None:
         _warn_once("no C compiler: $CC, cc and gcc not found")
         return None
+    folder = _library_folder()
     attempts = [(*flags, *native_flags), tuple(flags)] if native_flags else [tuple(flags)]
     reason = None
     for attempt in attempts:
-        library = cache_directory() / f"{name}-{cache_key(source, attempt, identity)}.so"
+        library = folder / f"{name}-{cache_key(source, attempt, identity)}.so"
         try:
             os.utime(library)  # recently used: the last to be pruned
-            return library
         except FileNotFoundError:
             pass  # not built yet (or just pruned by another process)
+        else:
+            if _loads(library):
+                return library
+            library.unlink(missing_ok=True)  # damaged: built again below
         reason = _run_compiler(identity[0], attempt, source, library)
+        if reason is None and not _loads(library):
+            library.unlink(missing_ok=True)
+            reason = "the library built does not load"
         if reason is None:
-            _prune(keep=library)
+            _prune(folder, keep=library)
             return library
     _warn_once(f"{reason} on {name}")
     return None
@@ -289,10 +383,16 @@ def compile_function(
     prelude: str = "",
 ) -> ca.Function | None:
     """``function`` as native code (same name, inputs and outputs), or None where it cannot
-    be built (then evaluate ``function`` itself). ``prelude`` is C put before the generated
-    source (inline replacements of math functions, say)."""
+    be built or loaded (then evaluate ``function`` itself). ``prelude`` is C put before the
+    generated source (inline replacements of math functions, say)."""
     library = build(function.name(), prelude + c_source(function), flags, native_flags)
-    return None if library is None else ca.external(function.name(), str(library))
+    if library is None:
+        return None
+    try:
+        return ca.external(function.name(), str(library))
+    except RuntimeError as err:  # loads, but not as CasADi expects (no such function)
+        _warn_once(f"{library.name} does not load into CasADi: {str(err).splitlines()[0]}")
+        return None
 
 
 def cache_info() -> CacheInfo:

@@ -21,11 +21,8 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-from hframe_id.cli import model_files, signals
+from hframe_id.cli import model_files, progress, signals
 from hframe_id.errors import HframeIdError
-
-#: Exit status of a command ended by Ctrl-C or SIGTERM (128 + SIGINT, the shells' convention).
-EXIT_INTERRUPTED = 130
 
 #: The subcommands in the order ``hframe-id --help`` lists them: (name, module, one line of
 #: help). To add a command, write a module with ``register(subparsers)`` and add its line.
@@ -149,7 +146,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         with signals.handled():
             try:
                 args = parser.parse_args(argv)  # a numeric option out of range: OptionError
-                with warnings.catch_warnings():
+                with (
+                    warnings.catch_warnings(),
+                    progress.library_messages(getattr(args, "quiet", False)),
+                ):
                     warnings.showwarning = _one_line_warning
                     model_files.load(args)
                     code = int(args.handler(args) or 0)
@@ -167,7 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as err:
         detail = f": {err}" if str(err) else " (Ctrl-C)"
         print(f"hframe-id: interrupted{detail}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return signals.EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,12 +1,17 @@
 """``hframe-id cache info|clear``: where compiled native code is kept, how much, and emptying it.
 
 The cache (``hframe_id.native``) only saves compiler runs: clearing it is always safe, the
-next simulation or fit rebuilds what it needs (1-2 s per library).
+next simulation or fit rebuilds what it needs (1-2 s per library). A damaged library heals
+itself (it is rebuilt when it does not load), and a cache folder that cannot be used costs
+fits and simulations one warning (they keep their libraries for the run only), while
+``cache info`` and ``cache clear`` refuse it in one line.
 """
 
 from __future__ import annotations
 
 import argparse
+
+from hframe_id.cli.outputs import check_dir
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -30,9 +35,11 @@ def _size(size: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``hframe-id cache info|clear``."""
+    """Run ``hframe-id cache info|clear``; a cache folder that cannot be used (it, or a folder
+    above it, is a file; it cannot be written) is one error line."""
     from hframe_id import native
 
+    check_dir(native.cache_directory(), "cache folder ($HFRAME_ID_CACHE/native)")
     if args.action == "clear":
         freed = native.clear_cache()
         print(f"cleared {native.cache_directory()} ({_size(freed)} freed)")

@@ -117,7 +117,8 @@ def written_together() -> Iterator[Staging]:
     them (a full disk, a folder changed meanwhile) is an ``OptionError`` naming the output."""
     staging = Staging()
     try:
-        yield staging
+        with signals.discard_on_exit(staging.discard):
+            yield staging
         signals.check()  # an interrupt lost in C code: nothing is put in place
         staging.commit()
     except OSError as err:

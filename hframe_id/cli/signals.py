@@ -14,13 +14,25 @@ interrupted whatever became of the first exception, and ``written_together`` cal
 it puts outputs in place, so that an interrupted run never commits them. The record is
 module state because a signal handler has nowhere else to put it; ``handled()`` clears it
 on entry.
+
+Python runs a signal's handler only between two bytecodes of the main thread, so a long
+call into C code (a CasADi simulation of a whole run is one call) would delay it by as long
+as the call lasts. The C-level handler does write the signal's number to a wakeup pipe at
+once (``signal.set_wakeup_fd``), and a watchdog thread reads it: CasADi releases the GIL
+while it computes, so the watchdog runs, and if the main thread has not run the handler
+``GRACE_S`` later it ends the process itself: it removes the outputs staged so far (those
+registered by ``discard_on_exit``), prints the line and exits 130 (``os._exit``: the main
+thread is inside C code and cannot unwind).
 """
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from hframe_id.errors import Interrupted
@@ -28,7 +40,13 @@ from hframe_id.errors import Interrupted
 #: The signals that end a command: Ctrl-C and ``kill``'s default.
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
+#: Seconds the main thread has to run the handler before the watchdog ends the process.
+GRACE_S = 0.5
+#: Exit status of a command ended by Ctrl-C or SIGTERM (128 + SIGINT, the shells' convention).
+EXIT_INTERRUPTED = 130
+
 _received: list[str] = []  # names of the signals received during the current command
+_discards: list[Callable[[], None]] = []  # what the watchdog removes before it exits
 
 
 def _handle(signum: int, frame: object) -> None:
@@ -45,16 +63,53 @@ def check() -> None:
 
 
 @contextmanager
+def discard_on_exit(discard: Callable[[], None]) -> Iterator[None]:
+    """In the block, the watchdog calls ``discard`` (a ``Staging.discard``) before it ends
+    the process."""
+    _discards.append(discard)
+    try:
+        yield
+    finally:
+        _discards.remove(discard)
+
+
+def _watch(wakeups: int) -> None:
+    """The watchdog: read signal numbers from the wakeup pipe until it is closed; end the
+    process if the main thread has not run the handler of a SIGINT or SIGTERM in time."""
+    ending = {int(signum) for signum in SIGNALS}
+    while data := os.read(wakeups, 64):
+        if not ending.intersection(data):
+            continue  # another signal with a Python handler (the model-file timer's)
+        time.sleep(GRACE_S)
+        if _received:
+            continue  # handled: the command is unwinding
+        for discard in reversed(_discards):
+            discard()
+        name = signal.Signals(next(iter(ending.intersection(data)))).name
+        sys.stderr.write(f"hframe-id: interrupted: {name} received\n")
+        sys.stderr.flush()
+        os._exit(EXIT_INTERRUPTED)
+    os.close(wakeups)
+
+
+@contextmanager
 def handled() -> Iterator[None]:
-    """SIGINT and SIGTERM raise ``Interrupted`` in the block (main thread only; elsewhere
-    the block runs with the handlers it has); the previous handlers are put back after."""
+    """SIGINT and SIGTERM raise ``Interrupted`` in the block, or end the process within
+    ``GRACE_S`` if the main thread is in C code (main thread only; elsewhere the block runs
+    with the handlers it has). The previous handlers are put back after."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     _received.clear()
+    wakeups, wakeup_writer = os.pipe()
+    os.set_blocking(wakeup_writer, False)
     previous = {signum: signal.signal(signum, _handle) for signum in SIGNALS}
+    previous_writer = signal.set_wakeup_fd(wakeup_writer, warn_on_full_buffer=False)
+    threading.Thread(target=_watch, args=(wakeups,), name="hframe-id signals", daemon=True).start()
     try:
         yield
     finally:
+        signal.set_wakeup_fd(previous_writer)
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        os.close(wakeup_writer)  # the watchdog reads the end of the pipe and stops
