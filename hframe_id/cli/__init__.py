@@ -85,6 +85,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
         "hframe_id.cli.validate_command",
         "simulation / k-step fit [%%] and residual tests of parameter files on recordings",
     ),
+    ("design", "hframe_id.cli.design_command", "design an experiment within the rig's limits"),
     ("batch", "hframe_id.cli.batch_command", "fit every entry of a manifest on Dask into Parquet"),
     ("fleet", "hframe_id.cli.fleet_command", "synthetic fleets; rig histories and drift flags"),
     ("cache", "hframe_id.cli.cache_command", "show or clear the cache of compiled native code"),

@@ -151,6 +151,7 @@ class Design:
     criterion : the criterion optimised.
     value : its value averaged over the parameter sets (smaller is better).
     reach : per parameter set, per axis, (min, max) [m] of the predicted motion.
+    motion : per parameter set, the (N, axes) predicted positions [m] of the travel's axes.
     parameter_sets : the file's values and the draws.
     prior : per parameter set, the prior information (ridge and recordings already made).
     wall_time_s : how long the design took [s].
@@ -162,6 +163,7 @@ class Design:
     criterion: Criterion
     value: float
     reach: tuple[dict[str, tuple[float, float]], ...]
+    motion: tuple[np.ndarray, ...]
     parameter_sets: tuple[ParameterSet, ...]
     prior: tuple[np.ndarray, ...]
     wall_time_s: float
@@ -347,6 +349,9 @@ def design_experiment(
         criterion=options.criterion,
         value=float(np.mean(values)),
         reach=reach,
+        motion=tuple(
+            info.outputs[0][:, [info.output_names.index(a) for a in axes]] for info in infos
+        ),
         parameter_sets=tuple(sets),
         prior=tuple(priors),
         wall_time_s=time.perf_counter() - start,
