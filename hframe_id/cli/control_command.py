@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
@@ -21,6 +21,7 @@ from hframe_id.cli.outputs import (
     check_length,
     written_together,
 )
+from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.control.trajectory import (
     SQUARE_F_A,
     SQUARE_SIDE_M,
@@ -70,55 +71,60 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "time base the controller runs on",
     )
     gains = parser.add_argument_group("controller")
-    gains.add_argument("--kp", type=float, help="K_P [V/rad] (required without --controller)")
-    gains.add_argument("--ki", type=float, default=0.0, help="K_I [V/(rad s)] (0: PD)")
-    gains.add_argument("--kd", type=float, default=0.0, help="K_D [V s/rad]")
-    gains.add_argument(
+    add_number(gains, "--kp", at_least=0, help="K_P [V/rad] (required without --controller)")
+    add_number(gains, "--ki", at_least=0, default=0.0, help="K_I [V/(rad s)] (0: PD)")
+    add_number(gains, "--kd", at_least=0, default=0.0, help="K_D [V s/rad]")
+    add_number(
+        gains,
         "--motor2-gain-scale",
-        type=float,
+        above=0,
         default=1.0,
         help="multiply motor 2's gains (section 5.7 uses 1.1)",
     )
-    gains.add_argument("--sample-time", type=float, help="T [s] (default 0.001)")
-    gains.add_argument(
+    add_number(gains, "--sample-time", above=0, help="T [s] (default 0.001)")
+    add_number(
+        gains,
         "--delay-samples",
-        type=int,
+        int,
+        at_least=0,
         default=0,
         help="samples between computing and applying a voltage (default 0, as Fig. 5.8)",
     )
     path = parser.add_argument_group("trajectory")
     path.add_argument("--trajectory", choices=("square", "points"), default="square")
-    path.add_argument("--side", type=float, default=SQUARE_SIDE_M, help="square side [m]")
-    path.add_argument(
-        "--v-max", type=float, default=SQUARE_V_MAX_M_PER_S, help="leg speed v_max [m/s]"
-    )
-    path.add_argument("--f-a", type=float, default=SQUARE_F_A, help="T_a / T (eq. 5.8)")
+    add_number(path, "--side", above=0, default=SQUARE_SIDE_M, help="square side [m]")
+    add_number(path, "--v-max", above=0, default=SQUARE_V_MAX_M_PER_S, help="leg speed v_max [m/s]")
+    add_number(path, "--f-a", above=0, at_most=0.5, default=SQUARE_F_A, help="T_a / T (eq. 5.8)")
     path.add_argument(
         "--points",
         metavar="X,Y;X,Y;...",
         help="points: the path's corners [m], the first being the start",
     )
-    path.add_argument("--dwell", type=float, default=0.0, help="points: hold at each corner [s]")
-    path.add_argument(
+    add_number(path, "--dwell", at_least=0, default=0.0, help="points: hold at each corner [s]")
+    add_number(
+        path,
         "--settle",
-        type=float,
+        at_least=0,
         default=None,
         help="hold after the last leg [s] (square 0, points 0.2)",
     )
-    path.add_argument(
+    add_number(
+        path,
         "--workspace",
-        type=float,
         nargs=4,
         metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
         help="reachable rectangle [m] (default +/-0.1 m)",
     )
     parser.add_argument("--friction", metavar="{smooth,stick-slip,sign}", default="smooth")
-    parser.add_argument("--substeps", type=int, help="RK4 substeps per sample (default: auto)")
+    add_number(
+        parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
+    )
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")
     out.add_argument("--plot", type=Path, metavar="DIR", help="write the four figures here")
     out.add_argument("--csv", type=Path, help="write the closed-loop signals to this CSV file")
     add_force_option(out)
+    add_quiet_option(out)
     parser.set_defaults(handler=run)
 
 
@@ -136,19 +142,12 @@ def _points(text: str | None) -> list[tuple[float, float]]:
     return points
 
 
-def _nonnegative(name: str, value: float | None) -> None:
-    if value is not None and not (math.isfinite(value) and value >= 0):
-        raise OptionError(f"{name} must be >= 0, got {value}")
-
-
 def build_trajectory(args: argparse.Namespace):
     """The reference path asked for: the test square (section 5.2) or point-to-point moves.
 
     Lengths in [m], speeds in [m/s], times in [s]; ``--settle`` defaults to 0 for the square (as
     in the thesis) and to 0.2 s for points. Raises OptionError for options that do not fit.
     """
-    _nonnegative("--settle", args.settle)
-    _nonnegative("--dwell", args.dwell)
     if args.trajectory == "square":
         if args.points is not None:
             raise OptionError("--points is for --trajectory points")
@@ -161,8 +160,6 @@ def _controller(args: argparse.Namespace) -> ControllerOptions:
     from hframe_id.control.pid import SAMPLE_PERIOD_S, ControllerOptions, PIDGains
 
     sample_time = SAMPLE_PERIOD_S if args.sample_time is None else args.sample_time
-    if not (math.isfinite(sample_time) and sample_time > 0):
-        raise OptionError(f"--sample-time must be > 0 s, got {sample_time}")
     gains = PIDGains(args.kp, args.ki, args.kd)
     return ControllerOptions(
         gains,
@@ -227,21 +224,22 @@ def run(args: argparse.Namespace) -> int:
     workspace = Workspace(*args.workspace) if args.workspace else Workspace()
     workspace.check(trajectory)
     friction = FrictionOptions(args.friction)
-    if args.substeps is not None and args.substeps < 1:
-        raise OptionError(f"--substeps must be >= 1, got {args.substeps}")
     _check_outputs(args)
     params = load_parameter_file(args.params, args.variant)
     model = build_model(params.variant)
     check_hframe(model)
-    result = simulate_closed_loop(
-        model,
-        model.parameter_vector(params.values),
-        trajectory,
-        controller,
-        friction=friction,
-        workspace=workspace,
-        n_substeps=args.substeps,
-    )
+    with Progress(args.quiet).slow(
+        f"simulating {trajectory.end_time_s:g} s of {model.variant} under the PID loops"
+    ):
+        result = simulate_closed_loop(
+            model,
+            model.parameter_vector(params.values),
+            trajectory,
+            controller,
+            friction=friction,
+            workspace=workspace,
+            n_substeps=args.substeps,
+        )
     if not np.isfinite(result.states).all():
         raise OptionError("the simulation diverged (non-finite states); try more --substeps")
     metrics = leg_metrics(result.time_s, result.xy_m, trajectory)

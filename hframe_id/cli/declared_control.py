@@ -14,6 +14,7 @@ import argparse
 import json
 
 from hframe_id.cli.outputs import check_file, written_together
+from hframe_id.cli.progress import Progress
 from hframe_id.control.trajectory import SQUARE_F_A, SQUARE_SIDE_M, SQUARE_V_MAX_M_PER_S
 from hframe_id.errors import ControllerError, OptionError
 
@@ -115,8 +116,6 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.validation.replay import channels, rest_state
 
     check_options(args)
-    if args.substeps is not None and args.substeps < 1:
-        raise OptionError(f"--substeps must be >= 1, got {args.substeps}")
     friction = FrictionOptions(args.friction)
     if args.csv is not None:
         check_file(args.csv, "--csv", args.force)
@@ -131,7 +130,9 @@ def run(args: argparse.Namespace) -> int:
     x0 = rest_state(model, p, channels(model, recording)) if measures and fits else None
     if x0 is None:
         x0 = np.zeros(model.n_states)
-    result = simulate_loop(model, p, controller, recording, x0, friction, args.substeps)
+    what = f"simulating {args.reference} under {controller.name}"
+    with Progress(args.quiet).slow(what):
+        result = simulate_loop(model, p, controller, recording, x0, friction, args.substeps)
     if not result.stable:
         raise ControllerError(
             f"{controller.where}: unstable closed loop with {args.params}: the simulation "

@@ -12,6 +12,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import check_dir
 from hframe_id.errors import FitError, OptionError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
@@ -133,9 +134,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "positive (parameters are fitted in log scale) and enclosing the initial value "
         "(repeatable)",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--bound-factor",
-        type=float,
+        float,
+        above=1,
         default=10.0,
         help="default bounds: initial value divided / multiplied by this",
     )
@@ -172,9 +175,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "2 ms read-out latency at 1 kHz); not estimated: in steady motion it looks like "
         "belt stretch",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--shooting-interval",
-        type=int,
+        int,
+        at_least=1,
         metavar="SAMPLES",
         help="samples per shooting interval (a node every this many samples; default: the "
         "model's fit default, else 10)",
@@ -226,18 +231,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "its start, the equation-error estimate and the model's reference files): ended "
         "worse, it continues from the best of them, or fails saying so; repeatable",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--starts",
-        type=int,
+        int,
+        at_least=1,
         default=FitOptions.starts,
         metavar="N",
         help="a multistart portfolio: the fit from the start and from N-1 seeded draws "
         "around it (each free parameter x/÷2 at most), the best kept and how many starts "
         "reached it reported (default 1: the start only); N fits' time",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--start-seed",
-        type=int,
+        int,
+        at_least=0,
         default=FitOptions.start_seed,
         metavar="S",
         help="seed of the portfolio's draws (default 0)",
@@ -248,37 +257,47 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="skip the equation-error start and the stages on the moving windows (start the "
         "full multiple-shooting problem directly from --initial)",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--max-iterations",
-        type=int,
+        int,
+        at_least=1,
         default=FitOptions.max_iterations,
         help="Gauss-Newton iterations per stage",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--step-tol",
-        type=float,
+        float,
+        above=0,
         default=1e-6,
         help="converged when no parameter changes by more than this (relative)",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--defect-tol",
-        type=float,
+        float,
+        above=0,
         default=1e-2,
         help="continuity defects at convergence, in noise units; a stage that can no "
         "longer decrease its cost is also accepted with defects below 2 noise std if the "
         "residuals are at the noise level (rms <= 1.5 std), and the largest defect is "
         "reported in the solver message",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--identifiability-threshold",
-        type=float,
+        float,
+        above=0,
         default=0.1,
         help="relative std error above which a parameter counts as not "
         "identified and is held at its initial value",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--max-misfit",
-        type=float,
+        float,
+        above=0,
         default=None,
         help="a fit whose residual rms exceeds this many std of the sensors' noise (the "
         "rig's specification or --channel-std, never a level estimated from the residuals) "
@@ -300,9 +319,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "parameter at its value x exp(+/-0.2): slower, for effects that are not linear) or "
         "'prior' (estimated, with the prior as a penalty: maximum a posteriori)",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--threads",
-        type=int,
+        int,
+        at_least=1,
         default=None,
         help="worker threads (default: the CPU count, at most 8)",
     )

@@ -24,6 +24,7 @@ from hframe_id.cli.outputs import (
     check_length,
     written_together,
 )
+from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 
 if TYPE_CHECKING:  # imported when a simulation runs, not for --help
@@ -101,6 +102,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"
     )
+    add_quiet_option(parser)
     parser.set_defaults(handler=run)
 
 
@@ -258,7 +260,9 @@ def run(args: argparse.Namespace) -> int:
     plant, model = _load_plant(args)
     _check_writable(args)
     table, dt, source = _inputs(args, model.n_inputs)
-    result, n = _simulate(args, plant, model, table, dt)
+    progress = Progress(args.quiet)
+    with progress.slow(f"simulating {table.shape[0] * dt:g} s of {model.variant} ({source})"):
+        result, n = _simulate(args, plant, model, table, dt)
     if not np.isfinite(result.states).all():
         raise OptionError("the simulation diverged (non-finite states); try more --substeps")
     law = "plant's" if args.plant else f"{args.friction or 'smooth'}"
@@ -290,7 +294,8 @@ def run(args: argparse.Namespace) -> int:
     with written_together() as staging:
         _frame(result).to_csv(staging.file(args.out), index=False)
         if args.mcap is not None:
-            summary = _record(args, plant, table, dt, n, source, staging.file(args.mcap))
+            with progress.slow(f"recording {args.mcap} with the sim rig"):
+                summary = _record(args, plant, table, dt, n, source, staging.file(args.mcap))
             state = f"aborted: {summary.abort_reason}" if summary.aborted else "complete"
             report["mcap"] = {
                 "file": args.mcap,
