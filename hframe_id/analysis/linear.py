@@ -121,7 +121,7 @@ def linearize(params: ParameterSet, model: Model | None = None) -> LinearModel:
     x = ca.SX.sym("x", model.n_states)
     u = ca.SX.sym("u", model.n_inputs)
     xdot = model.f(x, u, p)
-    y = model.output(x)
+    y = model.output_map(x, u, p)
     jac = ca.Function(
         "linearization",
         [x, u],

@@ -119,7 +119,7 @@ class RunResult:
     label : the parameter set's label (its file name).
     params : the parameter set.
     data : the recording's channels (measured, valid, inputs).
-    simulated, predicted : (N, n_y) simulated and k-step-ahead outputs [rad or m].
+    simulated, predicted : (N, n_y) simulated and k-step-ahead outputs [SI].
     channels : per-channel results, in the model's output order.
     open_loop_rmse : by channel, the open-loop RMSE after ``init_samples`` [SI unit].
     inverse_model : the inverse-model (IDIM) force error.

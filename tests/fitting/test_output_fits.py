@@ -1,0 +1,143 @@
+"""Fits of outputs that are not coordinates (``Output`` declarations, docs/custom-models.md): a
+DC servo's tachometer speed alone, with its angle, and with its armature current, recovered
+from simulated records with known parameters; the output map's Jacobians are exact; each
+channel's noise comes from the declaration, the rig or the residuals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from servo_outputs import NOISE, TRUTH, servo_model_file, servo_recording, start
+
+from hframe_id.errors import FitError
+from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.problem import (
+    build_problem,
+    default_channel_std,
+    output_kinds,
+    starts_at_rest,
+)
+from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.models import build_model
+
+
+@pytest.fixture(scope="module")
+def servo(tmp_path_factory):
+    """``servo(variant)``: the model name of a DC servo variant (``servo_outputs``)."""
+    folder = tmp_path_factory.mktemp("servo")
+    names = {}
+
+    def load(variant: str) -> str:
+        if variant not in names:
+            names[variant] = servo_model_file(folder, variant)[0]
+        return names[variant]
+
+    return load
+
+
+def _check_recovered(result, limits: dict[str, float]) -> None:
+    """Each estimate within its relative limit of the truth and within 4 of its own standard
+    errors (seeded data: a correct fit misses 4 sigma with probability 6e-5)."""
+    assert result.success, result.message
+    for name, limit in limits.items():
+        est = result.estimates[name]
+        error = est.estimate - TRUTH[name]
+        assert abs(error) <= limit * TRUTH[name], (name, est.estimate, TRUTH[name])
+        assert abs(error) <= 4 * est.std_error, (name, est.estimate, est.std_error)
+
+
+@pytest.mark.parametrize("variant", ["speed", "angle-speed"])
+def test_a_tachometer_speed_alone_or_with_the_angle_recovers_the_rotor(servo, variant):
+    name = servo(variant)
+    # From the speed, J w' = K g V / R - (K^2 / R + B) w - tau_c fixes J / g, B / g and
+    # tau_c / g: the amplifier gain is held at its (known) value, J, B and tau_c are fitted
+    # from the catalogue's start (30-50 % off).
+    result = fit_recordings(
+        [servo_recording(name, 1)], start(name, g=TRUTH["g"]), FitOptions(verbose=0, fix=("g",))
+    )
+    # 2000 samples at 0.5 rad/s tachometer noise: measured errors 0.02 % (J), 0.1 % (B),
+    # 0.3 % (tau_c) with the speed alone, 1e-5 with the angle (4096 counts/rev); the limits
+    # are 10-20 standard errors of the speed-only fit and far above the solver's step
+    # tolerance (1e-6 relative), so they test the output map, not the noise draw.
+    _check_recovered(result, {"J": 0.005, "B": 0.05, "tau_c": 0.03})
+
+
+def test_speed_and_armature_current_recover_the_gain_too(servo):
+    # The shipped model: the current (g V - K w) / R, nonlinear in the parameters, adds
+    # g / R, so the gain is fitted with J, B and tau_c (K and R held, the data sheet's).
+    name = servo("shipped")
+    result = fit_recordings([servo_recording(name, 2)], start(name), FitOptions(verbose=0))
+    # Measured errors: 5e-5 (J, g), 0.1 % (B), 0.2 % (tau_c); limits as above.
+    _check_recovered(result, {"J": 0.005, "B": 0.05, "tau_c": 0.03, "g": 0.005})
+
+
+def test_the_residual_jacobians_of_a_general_output_map_are_exact(servo):
+    name = servo("shipped")
+    problem = build_problem(
+        [servo_recording(name, 3, n=300)], start(name), FitOptions(verbose=0, shooting_interval=20)
+    )
+    ms = MultipleShooting(problem)
+    assert ms._output_index is None  # the current is no state: the general output map
+    nodes, _ = ms.initial_nodes(problem.p_initial)
+    theta = np.array([0.1, -0.2, 0.05, 0.03])  # J, B, tau_c, g moved off the start
+    nodes = nodes + np.array([0.0, 3.0])  # and the speeds off the measurements
+    ev = ms.evaluate(nodes, theta, problem.smoothing)
+    # Central differences (step 1e-6 in log p, 1e-4 rad/s): truncation ~h^2 / 6 f''' and
+    # round-off ~1e-16 / h relative, both below 1e-6 of the largest entry; the tolerance is
+    # 1e-5 of it.
+    for i in range(theta.size):
+        h = 1e-6
+        up = ms.evaluate(nodes, theta + h * np.eye(theta.size)[i], problem.smoothing)
+        down = ms.evaluate(nodes, theta - h * np.eye(theta.size)[i], problem.smoothing)
+        numeric = (up.residual - down.residual) / (2 * h)
+        scale = np.abs(numeric).max()
+        np.testing.assert_allclose(ev.jac_theta[..., i], numeric, rtol=0, atol=1e-5 * scale)
+    h = 1e-4
+    step = np.zeros_like(nodes)
+    step[:, 1] = h
+    up = ms.evaluate(nodes + step, theta, problem.smoothing, derivatives=False)
+    down = ms.evaluate(nodes - step, theta, problem.smoothing, derivatives=False)
+    numeric = (up.residual - down.residual) / (2 * h)
+    np.testing.assert_allclose(
+        ev.jac_node[..., 1], numeric, rtol=0, atol=1e-5 * np.abs(numeric).max()
+    )
+
+
+def test_noise_comes_from_the_rig_then_the_declaration(servo):
+    name = servo("shipped")
+    model = build_model(name)
+    declared = servo_recording(name, 4, n=200)
+    assert default_channel_std(declared, "omega", model) == 0.5  # models/dc_servo.py
+    assert default_channel_std(declared, "current", model) == 0.01
+    rig = servo_recording(name, 4, n=200, rig={"noise_std_omega": 0.2})
+    assert default_channel_std(rig, "omega", model) == 0.2  # the rig's own sensor wins
+    with pytest.raises(FitError, match="noise_std in the model's Output declaration"):
+        default_channel_std(declared, "omega")  # no model: nothing declares it
+
+
+def test_the_residuals_estimate_each_channels_noise(servo):
+    name = servo("angle-speed")
+    result = fit_recordings(
+        [servo_recording(name, 5)],
+        start(name, g=TRUTH["g"]),
+        FitOptions(verbose=0, fix=("g",), noise="estimate"),
+    )
+    assert result.success, result.message
+    channels = result.diagnostics["noise"]["channels"]
+    # The rms of 2000 residuals estimates each noise std within 2 sqrt(1 / (2 N)) = 3 %.
+    for output in ("theta", "omega"):
+        assert channels[output]["residual_rms"] == pytest.approx(NOISE[output], rel=0.03)
+
+
+def test_a_speed_shows_rest_by_its_value(servo):
+    model = build_model(servo("shipped"))
+    assert output_kinds(model) == ("rate", "other")
+    dt, std = 1e-3, np.array([0.5])
+    valid = np.ones((10, 1), dtype=bool)
+    still = np.random.default_rng(6).normal(0.0, 0.5, (10, 1))
+    turning = still + 100.0  # a constant 100 rad/s: no slope, but not at rest
+    assert starts_at_rest(still, valid, std, 10, dt, ("rate",))
+    assert not starts_at_rest(turning, valid, std, 10, dt, ("rate",))
+    assert starts_at_rest(turning, valid, std, 10, dt)  # read as a position, it is still
+    # A current alone cannot tell rest from motion: rest is not assumed.
+    assert not starts_at_rest(still, valid, std, 10, dt, ("other",))
