@@ -32,19 +32,29 @@ OUTPUTS = {
 }
 
 
+#: Model files written and loaded in this process, by variant: the registry takes a model
+#: name from one file only.
+_LOADED: dict[str, tuple[str, Path]] = {}
+
+
 def servo_model_file(folder: Path, variant: str) -> tuple[str, Path]:
     """(model name, path) of ``models/dc_servo.py`` itself (``"shipped"``) or of a copy in
-    ``folder`` declaring the outputs ``OUTPUTS[variant]``, loaded."""
+    ``folder`` declaring the outputs ``OUTPUTS[variant]``, loaded (once per process: later
+    calls return the first copy)."""
+    if variant in _LOADED:
+        return _LOADED[variant]
     if variant == "shipped":
-        load_model_file(MODEL_FILE)
-        return "dc-servo", MODEL_FILE
-    name = f"dc-servo-{variant}"
-    text = MODEL_FILE.read_text().replace('name="dc-servo"', f'name="{name}"')
-    text = text.replace('reference="dc-servo-catalogue.yaml",', "reference=None,")
-    text = re.sub(r"outputs=\[.*?\n    \],", f"outputs=[{OUTPUTS[variant]}],", text, flags=re.S)
-    path = folder / f"{name.replace('-', '_')}.py"
-    path.write_text(text)
+        name, path = "dc-servo", MODEL_FILE
+    else:
+        name = f"dc-servo-{variant}"
+        text = MODEL_FILE.read_text().replace('name="dc-servo"', f'name="{name}"')
+        text = text.replace('reference="dc-servo-catalogue.yaml",', "reference=None,")
+        outputs = f"outputs=[{OUTPUTS[variant]}],"
+        text = re.sub(r"outputs=\[.*?\n    \],", outputs, text, flags=re.S)
+        path = folder / f"{name.replace('-', '_')}.py"
+        path.write_text(text)
     load_model_file(path)
+    _LOADED[variant] = name, path
     return name, path
 
 

@@ -25,14 +25,7 @@ from hframe_id.models import build_model
 def servo(tmp_path_factory):
     """``servo(variant)``: the model name of a DC servo variant (``servo_outputs``)."""
     folder = tmp_path_factory.mktemp("servo")
-    names = {}
-
-    def load(variant: str) -> str:
-        if variant not in names:
-            names[variant] = servo_model_file(folder, variant)[0]
-        return names[variant]
-
-    return load
+    return lambda variant: servo_model_file(folder, variant)[0]
 
 
 def _check_recovered(result, limits: dict[str, float]) -> None:
