@@ -135,6 +135,15 @@ class _Transcription:
 
     def __init__(self, ms: MultipleShooting, theta, active, smoothing, n_sub: int):
         problem = ms.problem
+        if np.any(ms.output_states < 0):
+            # The residuals below are C x: exact for outputs that are states only.
+            others = [
+                n for n, i in zip(problem.output_names, ms.output_states, strict=True) if i < 0
+            ]
+            raise OptionError(
+                f"the NLP solvers take outputs that are coordinates or rates; model "
+                f"{ms.model.variant} outputs {', '.join(others)}: use the Gauss-Newton solver"
+            )
         self.ms = ms
         w, m, nx, ny = ms.n_windows, ms.m, ms.nx, ms.ny
         nf = len(problem.free)

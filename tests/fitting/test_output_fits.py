@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from servo_outputs import NOISE, TRUTH, servo_model_file, servo_recording, start
 
-from hframe_id.errors import FitError
+from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.problem import (
     build_problem,
@@ -62,6 +62,14 @@ def test_speed_and_armature_current_recover_the_gain_too(servo):
     result = fit_recordings([servo_recording(name, 2)], start(name), FitOptions(verbose=0))
     # Measured errors: 5e-5 (J, g), 0.1 % (B), 0.2 % (tau_c); limits as above.
     _check_recovered(result, {"J": 0.005, "B": 0.05, "tau_c": 0.03, "g": 0.005})
+
+
+def test_the_nlp_solvers_refuse_an_output_that_is_no_state(servo):
+    name = servo("shipped")
+    with pytest.raises(OptionError, match="outputs current: use the Gauss-Newton solver"):
+        fit_recordings(
+            [servo_recording(name, 2, n=300)], start(name), FitOptions(verbose=0, solver="ipopt")
+        )
 
 
 def test_the_residual_jacobians_of_a_general_output_map_are_exact(servo):

@@ -19,8 +19,11 @@ from servo_outputs import (
 )
 
 from hframe_id.cli import main
+from hframe_id.control import declare_controller
+from hframe_id.errors import ControllerError
+from hframe_id.models import Signal
 from hframe_id.parameters import ParameterSet, load_parameter_file, save_parameter_file
-from hframe_id.validation import validate
+from hframe_id.validation import ValidationOptions, validate
 
 
 def test_validate_scores_a_speed_and_a_current_in_their_units(tmp_path):
@@ -36,6 +39,23 @@ def test_validate_scores_a_speed_and_a_current_in_their_units(tmp_path):
         assert channel.residual_rms == pytest.approx(NOISE[output], rel=0.05), output
         assert channel.simulation_fit_percent > 99.0, output
         assert channel.prediction_fit_percent > 99.0, output
+
+
+def test_a_closed_loop_refuses_outputs_of_the_inputs_in_one_line(tmp_path):
+    name, _ = servo_model_file(tmp_path, "shipped")
+    speed_loop = declare_controller(
+        name="speed-loop",
+        description="proportional speed loop (test)",
+        commands=[Signal("V", "V", "amplifier input")],
+        measured=["omega"],
+        law=lambda y, r, z, g, T: {"commands": {"V": 0.1 * (100.0 - y["omega"])}},
+    )
+    truth = ParameterSet(name, dict(TRUTH), "truth", "test")
+    options = ValidationOptions(controller=speed_loop)
+    # The loop would read y = h(x) before computing the input h needs (the current).
+    with pytest.raises(ControllerError, match="output that depends on its inputs") as err:
+        validate([truth], [servo_recording(name, 8, n=200)], options)
+    assert "\n" not in str(err.value)
 
 
 def _servo_matrix(path, name: str, seed: int) -> None:

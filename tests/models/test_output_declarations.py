@@ -8,6 +8,7 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+import pandas as pd
 import pytest
 
 from hframe_id.analysis.linear import linearize
@@ -62,6 +63,27 @@ def test_linearize_gives_the_current_its_feedthrough(servo):
     # Catalogue: K 0.03, R 2, g 2: C = [[0, 1], [0, -K / R]], D = [[0], [g / R]].
     np.testing.assert_allclose(lin.C, [[0.0, 1.0], [0.0, -0.015]], rtol=1e-15)
     np.testing.assert_allclose(lin.D, [[0.0], [1.0]], rtol=1e-15)
+
+
+def test_simulate_writes_each_output_from_the_output_map(servo, tmp_path):
+    out = tmp_path / "step.csv"
+    argv = [
+        "simulate",
+        "--model-file",
+        str(SERVO),
+        "--params",
+        str(MODELS / "dc-servo-catalogue.yaml"),
+    ]
+    assert main([*argv, "--step", "1,5.0", "--duration", "0.5", "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    speed = table["state theta_dot [rad/s]"]
+    assert table["output omega [rad/s]"].tolist() == speed.tolist()
+    # Catalogue: g 2, K 0.03, R 2; the final row holds the last input (5 V).
+    np.testing.assert_allclose(table["output current [A]"], (2.0 * 5.0 - 0.03 * speed) / 2.0)
+    # Settled, the current's torque K I balances the friction B w + tau_c (1e-5, 2e-3).
+    assert 0.03 * table["output current [A]"].iloc[-1] == pytest.approx(
+        1e-5 * speed.iloc[-1] + 2e-3, rel=1e-3
+    )
 
 
 @pytest.mark.parametrize("variant", VARIANTS)
