@@ -34,7 +34,7 @@ from typing import Any
 import casadi as ca
 
 from hframe_id.errors import Interrupted, ModelError, shown
-from hframe_id.models.declaration import ModelDeclaration
+from hframe_id.models.declaration import ModelDeclaration, Output
 from hframe_id.models.lagrange import Friction, LagrangianSystem
 from hframe_id.models.options import ModelOptions
 from hframe_id.models.spec import ParameterSpec, Signal
@@ -144,7 +144,7 @@ def declare(
     description: str,
     coordinates: Sequence[Signal],
     inputs: Sequence[Signal],
-    outputs: Sequence[str],
+    outputs: Sequence[str | Output],
     parameters: Sequence[ParameterSpec],
     equations: Equations,
     reference: str | Path | None = None,
@@ -155,10 +155,12 @@ def declare(
 ) -> ModelDeclaration:
     """Declare a model by its energies (see the module docstring).
 
-    ``reference`` is the model's reference parameter file, relative to the file that calls
-    ``declare``; ``fixed`` and ``held`` are held in fits by default (measured constants, and
-    values the outputs do not determine); ``fit_defaults`` (``shooting_interval``,
-    ``continuity``) are how ``hframe-id fit`` transcribes the model's data by default.
+    ``outputs`` are coordinate names or ``Output`` declarations (a speed, a current: any
+    function of q, qdot, u, p). ``reference`` is the model's reference parameter file,
+    relative to the file that calls ``declare``; ``fixed`` and ``held`` are held in fits by
+    default (measured constants, and values the outputs do not determine); ``fit_defaults``
+    (``shooting_interval``, ``continuity``) are how ``hframe-id fit`` transcribes the model's
+    data by default.
     """
     caller = _caller_file()
     if reference is not None and not Path(reference).is_absolute():
