@@ -1,6 +1,7 @@
 """Predicted information of experiments: what a fit of their recordings would know.
 
-Each input table is simulated at given parameters (noise-free, through the rig's DAC),
+Each input table is simulated at given parameters from rest (noise-free, through the rig's
+DAC, by the transcription's own integrator: ``simulate_experiments``),
 measured as the rig measures it (a laser sample outside the laser's range, +/-5 cm on the
 thesis's rig, is invalid), and transcribed as ``hframe-id fit`` transcribes recordings
 (``build_problem`` with the fit's options, ``MultipleShooting``). At the simulated solution
@@ -26,7 +27,7 @@ import numpy as np
 
 from hframe_id.errors import FitError
 from hframe_id.fitting.options import FitOptions
-from hframe_id.fitting.problem import FitProblem, build_problem, rig_dac
+from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton
 from hframe_id.fitting.statistics import Block, compute_statistics
@@ -53,36 +54,34 @@ def rig_metadata(sensors: SensorModel) -> dict:
     return {"backend": "design", **sensors.as_metadata()}
 
 
-def simulated_recording(
+def predicted_recording(
     model: Model,
-    p: np.ndarray,
     commanded: np.ndarray,
+    states: np.ndarray | None,
     rig: dict,
     sample_period_s: float,
-    smoothing: tuple[float, float] | None,
     name: str,
     variant: str,
-) -> tuple[Recording, np.ndarray]:
-    """A noise-free recording of ``commanded`` (N, n_u) [V] on the model at ``p`` (SI), and
-    its (N + 1, n_x) states: the voltages through the rig's DAC (``rig_dac``), each laser
-    sample outside the rig's laser range (``laser_min_m``/``laser_max_m`` [m]) invalid."""
-    from hframe_id.simulation.open_loop import simulate
-
-    dac = rig_dac(rig)
+) -> Recording:
+    """A noise-free recording of ``commanded`` (N, n_u) [V] whose plant went through
+    ``states`` (N + 1, n_x), each laser sample outside the rig's laser range
+    (``laser_min_m``/``laser_max_m`` [m]) invalid; ``states`` None: a placeholder at rest,
+    every sample valid (to set up the transcription that simulates it)."""
     commanded = np.atleast_2d(np.asarray(commanded, dtype=float))
-    applied = commanded if dac is None else dac.dac(commanded)
-    states = simulate(model, p, applied, sample_period_s, smoothing=smoothing, compiled=True)
-    outputs = np.array(model.output.map(states.shape[0] - 1)(states[:-1].T)).T
+    n = commanded.shape[0]
+    outputs = np.zeros((n, len(model.outputs)))
+    if states is not None:
+        outputs = np.array(model.output.map(n)(states[:-1].T)).T
     valid = np.ones_like(outputs, dtype=bool)
     low = float(rig.get("laser_min_m", -math.inf))
     high = float(rig.get("laser_max_m", math.inf))
     for j, s in enumerate(model.outputs):
         if s.name in LASER_OUTPUTS:
             valid[:, j] = (outputs[:, j] >= low) & (outputs[:, j] <= high)
-    recording = Recording(
+    return Recording(
         variant=variant,
         sample_period_s=sample_period_s,
-        time_s=np.arange(outputs.shape[0]) * sample_period_s,
+        time_s=np.arange(n) * sample_period_s,
         inputs=commanded,
         input_names=tuple(s.name for s in model.inputs),
         outputs=np.where(valid, outputs, np.nan),
@@ -91,7 +90,26 @@ def simulated_recording(
         rig=dict(rig),
         experiment={"design": name},
     )
-    return recording, states
+
+
+def simulate_experiments(problem: FitProblem) -> list[np.ndarray]:
+    """Per experiment of ``problem``, the (N + 1, n_x) states from rest at the origin at its
+    initial parameters, through the rig's DAC (the problem's inputs): the transcription's own
+    compiled integrator (``MultipleShooting.fill_nodes`` chains the nodes, ``evaluate`` the
+    samples between them)."""
+    ms = MultipleShooting(problem)
+    theta = np.zeros(len(problem.free))
+    known = np.zeros(ms.n_windows, dtype=bool)
+    nodes = ms.fill_nodes(np.zeros((ms.n_windows, ms.nx)), known, theta, problem.smoothing)
+    ev = ms.evaluate(nodes, theta, problem.smoothing, derivatives=False)
+    all_states = []
+    for e in range(len(problem.experiments)):
+        windows = np.flatnonzero(ms.window_experiment == e)
+        parts = [ev.states[w, : ms.window_length[w]] for w in windows]
+        last = windows[-1]
+        parts.append(ev.states[last, ms.window_length[last]][None, :])
+        all_states.append(np.concatenate(parts))
+    return all_states
 
 
 @dataclass(frozen=True)
@@ -204,17 +222,19 @@ def experiment_information(
 
     model = build_model(params.variant)
     rig = dict(rig) if rig is not None else rig_metadata(sensors or SensorModel())
-    p = model.parameter_vector(params.values)
-    smoothing = options.smoothing or model.options.smoothing
     names = list(names) if names is not None else [f"design-{i}" for i in range(len(tables))]
-    recordings, all_states = [], []
-    for name, table in zip(names, tables, strict=True):
-        rec, states = simulated_recording(
-            model, p, table, rig, sample_period_s, smoothing, name, params.variant
-        )
-        recordings.append(rec)
-        all_states.append(states)
-    problem = build_problem(recordings, params, options)
+    if len(names) != len(tables):
+        raise FitError(f"{len(names)} names for {len(tables)} experiments")
+
+    def recordings(all_states):
+        return [
+            predicted_recording(model, table, states, rig, sample_period_s, name, params.variant)
+            for name, table, states in zip(names, tables, all_states, strict=True)
+        ]
+
+    placeholder = build_problem(recordings([None] * len(tables)), params, options)
+    all_states = simulate_experiments(placeholder)
+    problem = build_problem(recordings(all_states), params, options)
     return _information(problem, all_states)
 
 
