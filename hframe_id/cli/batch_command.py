@@ -6,8 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import check_dir, check_file
-from hframe_id.errors import OptionError
+from hframe_id.errors import Interrupted, OptionError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,8 +22,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Parquet file, written as fits finish. Fits already in the store (same recordings' "
             "sha256, model, initial file and options) are skipped. A fit that fails is a row "
             "with its status and message. Parameter files (and reports) go to --out-dir. "
-            "Exit status: 0 every fit stored (even failed ones), 2 bad input, 130 Ctrl-C "
-            "(finished rows kept)."
+            "Exit status: 0 every fit stored (even failed ones), 2 bad input (an unreachable "
+            "--scheduler too), 130 Ctrl-C or SIGTERM (finished rows kept with their files, "
+            "none of the unfinished fits' files)."
         ),
     )
     parser.add_argument("manifest", metavar="MANIFEST", help="the manifest (.yaml or .csv)")
@@ -35,9 +37,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="an existing Dask scheduler (tcp://host:8786), used as it is; default: a "
         "LocalCluster on this machine",
     )
-    parser.add_argument(
+    add_number(
+        parser,
         "--workers",
-        type=int,
+        int,
+        at_least=1,
         metavar="N",
         help="LocalCluster worker processes, one thread each (default: the CPU count)",
     )
@@ -64,8 +68,6 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.fleet.runner import dask_client, run_batch
     from hframe_id.fleet.store import ResultsStore
 
-    if args.workers is not None and args.workers < 1:
-        raise OptionError(f"--workers must be >= 1, got {args.workers}")
     if args.scheduler and args.workers is not None:
         raise OptionError("--workers starts a LocalCluster; it cannot go with --scheduler")
     results = Path(args.results)
@@ -98,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
             reports=not args.no_reports,
             progress=progress,
         )
-    except KeyboardInterrupt:
-        print(f"hframe-id: interrupted; {len(store)} row(s) in {results}", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        raise Interrupted(f"{str(err) or 'Ctrl-C'}; {len(store)} row(s) in {results}") from None
     print(f"{summary.line()}; {len(store)} row(s) in {results}")
     return 0

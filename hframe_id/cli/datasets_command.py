@@ -3,10 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
+from hframe_id.cli import signals
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_dir
+from hframe_id.cli.outputs import check_dir, written_together
 from hframe_id.errors import LogFormatError
 
 
@@ -55,16 +62,41 @@ def _collection(args: argparse.Namespace):
     return REALISTIC if args.realistic else STANDARD
 
 
+@contextmanager
+def _scratch(out: Path) -> Iterator[Path]:
+    """A hidden temporary folder in ``out``'s nearest existing folder (the same file system,
+    so that its files can be renamed into place), removed with its contents afterwards,
+    and by the signal watchdog (``signals.discard_on_exit``)."""
+    parent = next(folder for folder in (out, *out.parents) if folder.is_dir())
+    scratch = Path(tempfile.mkdtemp(prefix=".hframe-id-datasets.", dir=parent))
+    remove = partial(shutil.rmtree, scratch, ignore_errors=True)
+    try:
+        with signals.discard_on_exit(remove):
+            yield scratch
+    finally:
+        remove()
+
+
 def run_make(args: argparse.Namespace) -> int:
-    """Run ``hframe-id datasets make``: write truth files, recordings and manifest."""
-    from hframe_id.rig.datasets import make_datasets
+    """Run ``hframe-id datasets make``: write truth files, recordings and manifest.
+
+    Everything is made in a scratch folder, then put in place together: Ctrl-C, SIGTERM or
+    a failure leaves ``--out`` as it was (with ``--only``, the manifest's other entries are
+    kept: the old manifest is the scratch folder's start).
+    """
+    from hframe_id.rig.datasets import MANIFEST, make_datasets
 
     def report(spec, summary) -> None:
         print(f"{spec.file:<20} {summary.samples} samples, truth {spec.truth}, seed {spec.seed}")
 
     out = check_dir(args.out or ("datasets/realistic" if args.realistic else "datasets"), "--out")
-    manifest = make_datasets(out, args.only, progress=report, collection=_collection(args))
-    print(f"manifest             {manifest}")
+    with written_together() as staging, _scratch(out) as scratch:
+        if args.only and (out / MANIFEST).is_file():
+            shutil.copyfile(out / MANIFEST, scratch / MANIFEST)
+        made = make_datasets(scratch, args.only, progress=report, collection=_collection(args))
+        for path in sorted(p for p in scratch.rglob("*") if p.is_file()):
+            os.replace(path, staging.file(out / path.relative_to(scratch)))
+    print(f"manifest             {out / made.relative_to(scratch)}")
     return 0
 
 

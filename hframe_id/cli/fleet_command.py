@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
+from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 
 #: What ``fleet report`` writes into its folder: the page, and the plots (replaced as a whole).
@@ -34,9 +35,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "DIR/manifest.yaml for 'hframe-id batch' and DIR/aging.yaml (what was aged, by "
         "how much). The same seed gives the same fleet.",
     )
-    make.add_argument("--rigs", type=int, required=True, metavar="N", help="number of rigs")
-    make.add_argument("--weeks", type=int, required=True, metavar="W", help="weekly runs (>= 2)")
-    make.add_argument("--seed", type=int, default=0, metavar="S", help="random seed")
+    add_number(make, "--rigs", int, at_least=1, required=True, metavar="N", help="number of rigs")
+    add_number(
+        make, "--weeks", int, at_least=2, required=True, metavar="W", help="weekly runs (>= 2)"
+    )
+    add_number(make, "--seed", int, at_least=0, default=0, metavar="S", help="random seed")
     make.add_argument("--out", required=True, metavar="DIR", help="new (or empty) folder")
     make.add_argument(
         "--plant",
@@ -45,6 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="sim: plants of the fitted model (default); realistic: hframe-20 plants with "
         "stick-slip friction, current limit and delays (docs/realistic-rig.md)",
     )
+    add_quiet_option(make)
     make.set_defaults(handler=run_make)
     report = actions.add_parser(
         "report",
@@ -55,9 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "parameter and a markdown page. Exit status 0 (also with flags), 2 bad input.",
     )
     report.add_argument("results", metavar="RESULTS", help="a results store (.parquet)")
-    report.add_argument(
+    add_number(
+        report,
         "--threshold",
-        type=float,
+        above=0,
+        below=1,
         default=None,
         metavar="FRACTION",
         help="relative change that counts as drift (default 0.1)",
@@ -82,13 +88,18 @@ def run_make(args: argparse.Namespace) -> int:
     ``aging.yaml``."""
     from hframe_id.fleet.synthetic import make_fleet
 
-    def progress(rig: str, week: int) -> None:
-        print(f"{rig} week {week}: recorded", file=sys.stderr, flush=True)
-
+    progress = Progress(args.quiet)
     out = check_dir(args.out, "--out", empty=True)
     with written_together() as staging:
         folder = staging.folder(out)
-        manifest = make_fleet(args.rigs, args.weeks, args.seed, folder, progress, args.plant)
+        manifest = make_fleet(
+            args.rigs,
+            args.weeks,
+            args.seed,
+            folder,
+            lambda rig, week: progress.line(f"{rig} week {week}: recorded"),
+            args.plant,
+        )
     print(f"manifest: {out / manifest.name}")
     print(f"aging: {out / 'aging.yaml'}")
     return 0
@@ -108,8 +119,6 @@ def run_report(args: argparse.Namespace) -> int:
     from hframe_id.fleet.store import read_results
 
     threshold = DEFAULT_THRESHOLD if args.threshold is None else args.threshold
-    if not 0 < threshold < 1:
-        raise OptionError(f"--threshold must be a fraction in (0, 1), got {threshold}")
     results = Path(args.results)
     if not results.is_file():
         raise OptionError(f"{results}: no such results file")

@@ -23,9 +23,10 @@ def checked(
     above: float | None = None,
     at_least: float | None = None,
     at_most: float | None = None,
+    below: float | None = None,
 ) -> Callable[[str], float]:
     """An argparse ``type=``: the text as ``kind`` (int or float), finite and within the
-    bounds (``above``: strictly greater; ``at_least``/``at_most``: inclusive)."""
+    bounds (``above``/``below``: strict; ``at_least``/``at_most``: inclusive)."""
 
     def parse(text: str):
         value = kind(text)  # ValueError: argparse's "invalid float value"
@@ -38,6 +39,8 @@ def checked(
             problem = f">= {at_least:g}"
         elif at_most is not None and not value <= at_most:
             problem = f"<= {at_most:g}"
+        elif below is not None and not value < below:
+            problem = f"< {below:g}"
         if problem is not None:
             raise OptionError(f"{option} must be {problem}, got {shown(text)}")
         return value
@@ -54,9 +57,10 @@ def add_number(
     above: float | None = None,
     at_least: float | None = None,
     at_most: float | None = None,
+    below: float | None = None,
     **kwargs,
 ) -> argparse.Action:
     """``parser.add_argument(option, type=checked(...), **kwargs)``: the option and its range
     in one declaration."""
-    kind_check = checked(option, kind, above=above, at_least=at_least, at_most=at_most)
+    kind_check = checked(option, kind, above=above, at_least=at_least, at_most=at_most, below=below)
     return parser.add_argument(option, type=kind_check, **kwargs)

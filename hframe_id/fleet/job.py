@@ -2,7 +2,12 @@
 
 ``run_job`` never raises for a bad fit: a solver that fails and an error while reading or
 fitting both come back as a row with ``status`` ``failed`` or ``error`` and the message, so
-that one bad run never stops a batch. The compiled kernels live in per-process caches
+that one bad run never stops a batch. A fit's files are written into a hidden folder of
+its own (``staged_folder``) and put in place by the client when it stores the fit's row
+(``runner.place_files``): a row and its files are stored together, and a fit whose row is
+never stored (Ctrl-C, a worker that died and whose task ran again) leaves no files.
+
+The compiled kernels live in per-process caches
 (``functools.lru_cache`` in ``hframe_id.fitting.kernel``) over an on-disk cache of shared
 libraries; a worker process keeps them between tasks, so each is built (or loaded) once per
 worker, and ``warm_up`` builds them before the first task.
@@ -11,6 +16,7 @@ worker, and ``warm_up`` builds them before the first task.
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import time
 import warnings
@@ -22,7 +28,7 @@ from hframe_id.fitting.kernel import compiled_windows
 from hframe_id.fitting.output import write_parameter_file
 from hframe_id.fitting.problem import resolve_free
 from hframe_id.fitting.report import write_report
-from hframe_id.fleet.keys import base_row, batch_options, batch_options_for
+from hframe_id.fleet.keys import base_row, batch_options, batch_options_for, staged_folder
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
@@ -51,8 +57,10 @@ def run_job(
     job: FitJob, key: str, digests: list[str], out_dir: Path, reports: bool
 ) -> dict[str, Any]:
     """Fit ``job`` and write its parameter file (and, with ``reports``, its report) into
-    ``out_dir``; the store's row for it (``status``, ``message``, estimates, timings)."""
+    ``staged_folder(out_dir, key)``; the store's row for it (``status``, ``message``,
+    estimates, timings; the files named where they will be once placed in ``out_dir``)."""
     row = base_row(job, key, digests)
+    staged = staged_folder(out_dir, key)
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
     start = time.perf_counter()
     try:
@@ -61,16 +69,19 @@ def run_job(
             recordings = [read_recording(p) for p in job.recordings]
             initial = load_parameter_file(job.initial, variant=job.model)
             result = fit_recordings(recordings, initial, batch_options(job))
-            out_dir.mkdir(parents=True, exist_ok=True)
-            fit_id, parameter_file = write_parameter_file(
-                result, recordings, list(job.recordings), job.initial, out_dir
+            shutil.rmtree(staged, ignore_errors=True)  # an earlier attempt's (a dead worker)
+            staged.mkdir(parents=True)
+            fit_id, written = write_parameter_file(
+                result, recordings, list(job.recordings), job.initial, staged
             )
+            parameter_file = out_dir / written.name if written else None
             report = (
-                write_report(result, recordings, fit_id, parameter_file, out_dir)
+                out_dir / write_report(result, recordings, fit_id, parameter_file, staged).name
                 if reports
                 else None
             )
     except Exception as err:  # any failure of one fit is its row, not the batch's end
+        shutil.rmtree(staged, ignore_errors=True)
         row.update(status="error", message=f"{type(err).__name__}: {err}")
         row["wall_time [s]"] = time.perf_counter() - start
         return row

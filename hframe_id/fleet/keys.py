@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from pathlib import Path
 from typing import Any
 
 from hframe_id.digests import sha256_file
@@ -61,3 +62,10 @@ def base_row(job: FitJob, key: str, digests: list[str]) -> dict[str, Any]:
         "initial": str(job.initial),
         "free": ",".join(job.free) if job.free else "",
     }
+
+
+def staged_folder(out_dir: Path, key: str) -> Path:
+    """Where the fit of ``key`` writes its files until its row is stored (``job.run_job``,
+    ``runner.place_files``): a hidden folder in ``out_dir`` (the same file system, so that
+    its files are renamed into place)."""
+    return out_dir / f".staged-{key[:20]}"

@@ -1,15 +1,20 @@
 """Run a manifest's fits on a Dask cluster, storing each row as it arrives.
 
-``client.submit(run_job, ...)`` per fit, then ``as_completed``: every finished fit is added
-to the store, which is written (atomically) at most every ``flush_interval_s`` and at the end,
-so a crash or Ctrl-C loses only unfinished fits. A worker that dies mid-fit has its task
+``client.submit(run_job, ...)`` per fit, then ``as_completed``: every finished fit's files
+are put in place (``place_files``) and its row added to the store, which is written
+(atomically) at most every ``flush_interval_s`` and at the end, so a crash or Ctrl-C loses
+only unfinished fits, and leaves none of their files (their staged folders are removed once
+the cluster is closed). A worker that dies mid-fit has its task
 rescheduled on another worker by the scheduler (``distributed.scheduler.allowed-failures``
 times, default 3); a task that outlives that many workers becomes an ``error`` row.
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import shutil
+import signal
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
@@ -22,7 +27,8 @@ from distributed import Client, LocalCluster, as_completed
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from hframe_id.digests import sha256_file
-from hframe_id.fleet.keys import base_row, batch_options, job_key
+from hframe_id.errors import HframeIdError, shown
+from hframe_id.fleet.keys import base_row, batch_options, job_key, staged_folder
 from hframe_id.fleet.manifest import FitJob
 from hframe_id.fleet.store import ResultsStore
 
@@ -74,24 +80,54 @@ def local_cluster(workers: int) -> Iterator[LocalCluster]:
     environment Dask's without ``SLOW_WORKER_ENVIRONMENT`` (one BLAS thread each kept).
 
     The key is removed from ``distributed.nanny.pre-spawn-environ`` after ``distributed`` is
-    imported (dask/distributed#8143: importing it restores removed defaults)."""
+    imported (dask/distributed#8143: importing it restores removed defaults). Dask's own log
+    lines below errors are silenced (a cancelled fit's warnings are no news to the user),
+    and on Ctrl-C or SIGTERM (``KeyboardInterrupt``) the worker processes are killed at once:
+    a worker in the middle of a fit would otherwise be waited for (4 s) before the nanny
+    kills it, and its files would be written meanwhile."""
     environ = dask.config.get("distributed.nanny.pre-spawn-environ", default={})
     kept = {k: v for k, v in environ.items() if k not in SLOW_WORKER_ENVIRONMENT}
     with (
         dask.config.set({"distributed.nanny.pre-spawn-environ": kept}),
         LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            silence_logs=logging.ERROR,
         ) as cluster,
     ):
-        yield cluster
+        try:
+            yield cluster
+        except KeyboardInterrupt:
+            for nanny in list(cluster.workers.values()):
+                if getattr(nanny, "pid", None):
+                    os.kill(nanny.pid, signal.SIGKILL)
+            raise
+
+
+class ClusterError(HframeIdError):
+    """The Dask scheduler cannot be reached."""
+
+
+#: Seconds to wait for a scheduler given by its address before giving up.
+CONNECT_TIMEOUT_S = 10
 
 
 @contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
-    """A client of the cluster at ``scheduler``, used as it is, or of a ``local_cluster`` of
-    ``workers`` worker processes (default: the CPU count) on this machine."""
+    """A client of the cluster at ``scheduler``, used as it is (``ClusterError`` if it does
+    not answer within ``CONNECT_TIMEOUT_S``), or of a ``local_cluster`` of ``workers`` worker
+    processes (default: the CPU count) on this machine."""
     if scheduler:
-        with Client(scheduler) as client:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except Exception as err:  # OSError, a malformed address, a peer that is no scheduler
+            reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+            raise ClusterError(
+                f"--scheduler {shown(scheduler)}: cannot connect: {shown(reason)}"
+            ) from None
+        with client:
             yield client
         return
     with local_cluster(workers or os.cpu_count() or 1) as cluster, Client(cluster) as client:
@@ -148,10 +184,36 @@ def run_batch(
     if not pending:
         summary.wall_time_s = time.perf_counter() - start
         return summary
-    with connect() as client:
-        _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress)
-        summary.wall_time_s = time.perf_counter() - start
+    try:
+        with connect() as client:
+            _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress)
+    finally:  # the unfinished fits' files (their workers are stopped by now, local ones)
+        for _, key, _ in pending:
+            shutil.rmtree(staged_folder(out_dir, key), ignore_errors=True)
+    summary.wall_time_s = time.perf_counter() - start
     return summary
+
+
+def place_files(row: dict[str, Any], out_dir: Path) -> dict[str, Any]:
+    """Move the files of ``row``'s fit from its staged folder into ``out_dir``, all or none:
+    the row as it is, or an ``error`` row if a file of that name is there already."""
+    staged = staged_folder(out_dir, row["key"])
+    entries = sorted(staged.iterdir()) if staged.is_dir() else []
+    taken = [entry.name for entry in entries if (out_dir / entry.name).exists()]
+    if taken:
+        shutil.rmtree(staged, ignore_errors=True)
+        return {
+            **row,
+            "status": "error",
+            "message": f"{out_dir / taken[0]} exists already; the fit's files are not stored",
+            "parameter_file": None,
+            "report": None,
+        }
+    for entry in entries:
+        os.replace(entry, out_dir / entry.name)
+    if staged.is_dir():
+        staged.rmdir()
+    return row
 
 
 def _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress) -> None:
@@ -168,7 +230,7 @@ def _run(client, pending, store, summary, out_dir, reports, flush_interval_s, pr
     last_flush = time.perf_counter()
     try:
         for future in as_completed(futures):
-            row = _row(future, *futures[future])
+            row = place_files(_row(future, *futures[future]), out_dir)
             store.add(row)
             summary.stored[row["status"]] = summary.stored.get(row["status"], 0) + 1
             if time.perf_counter() - last_flush >= flush_interval_s:
