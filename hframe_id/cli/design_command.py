@@ -151,6 +151,11 @@ def _design(args, params, limits, options, out: Path, report_path: Path, plot_pa
         rows = predictions(design, params, limits, options)
     except FitError as err:
         raise OptionError(f"--params {args.params}: {err}") from None
+    except FloatingPointError as err:
+        raise OptionError(
+            f"--params {args.params}: the model cannot be simulated at these values or the "
+            f"sets drawn around them ({err})"
+        ) from None
     dt = options.sample_period_s
     text = markdown(design, rows, params, limits, out.name, plot_path.name, dt)
     with written_together() as staging:

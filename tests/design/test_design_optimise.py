@@ -2,6 +2,7 @@
 say, draws that are seeded, and CSV sequences that ``hframe-id record`` plays back exactly."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,12 +12,14 @@ from hframe_id.design.criteria import Criterion
 from hframe_id.design.excitation import Layout, candidate_blocks, sequence_text
 from hframe_id.design.information import design_options, experiment_information
 from hframe_id.design.optimise import (
+    MAX_RELATIVE_SPREAD,
     MIN_RELATIVE_SPREAD,
     DesignOptions,
     Limits,
     choose,
     design_experiment,
     parameter_draws,
+    relative_spread,
 )
 from hframe_id.errors import OptionError
 from hframe_id.models import build_model
@@ -110,6 +113,26 @@ def test_draws_are_seeded_and_spread_at_least_the_floor(table):
         assert one.values == two.values
     logs = np.log([[s.values[n] / table.values[n] for n in names] for s in first[1:]])
     assert np.all(logs != 0) and np.all(np.abs(logs) < 5 * MIN_RELATIVE_SPREAD)
+
+
+def test_spread_follows_the_fits_errors_within_bounds(table):
+    """A fit's standard errors set the spread, floored and capped: a six-step fit of a
+    realistic plant reported relative errors up to 1e3 (measured), which overflowed."""
+    uncertainty = {
+        "parameters": {
+            "k_l [N/m]": {"estimate": 13167.0, "std_error": 13167.0 * 1e3},
+            "M_cart [kg]": {"estimate": 1.0412, "std_error": 1.0412 * 0.3},
+        }
+    }
+    fitted = replace(table, uncertainty=uncertainty)
+    spread = relative_spread(fitted, ("k_l", "M_cart", "k_r"))
+    assert spread == pytest.approx(
+        {"k_l": MAX_RELATIVE_SPREAD, "M_cart": 0.3, "k_r": MIN_RELATIVE_SPREAD}
+    )
+    assert all(
+        np.isfinite(list(s.values.values())).all()
+        for s in parameter_draws(fitted, ("k_l", "M_cart"), 5, seed=0)
+    )
 
 
 def test_limits_the_rig_cannot_meet_are_refused():
