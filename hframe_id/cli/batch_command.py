@@ -4,11 +4,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from hframe_id.cli import signals
 from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import check_dir, check_file
 from hframe_id.errors import Interrupted, OptionError
+
+if TYPE_CHECKING:  # Dask is imported when a batch runs, not for --help
+    from distributed import Client
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,11 +68,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+@contextmanager
+def _client(scheduler: str | None, workers: int | None) -> Iterator[Client]:
+    """``dask_client``, started with Ctrl-C and SIGTERM deferred (``signals.deferred``): a
+    LocalCluster interrupted while it starts cannot be closed, and Dask's exit handler then
+    prints a traceback. The interrupt ends the batch as soon as the cluster is up (seconds),
+    closing it."""
+    from hframe_id.fleet.runner import dask_client
+
+    with ExitStack() as stack:
+        with signals.deferred():
+            client = stack.enter_context(dask_client(scheduler, workers))
+        yield client
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id batch``: fit the manifest's pending entries on Dask into the results
     store; exit status 0 when every fit was stored (failed fits are rows too)."""
     from hframe_id.fleet.manifest import load_manifest
-    from hframe_id.fleet.runner import dask_client, run_batch
+    from hframe_id.fleet.runner import run_batch
     from hframe_id.fleet.store import ResultsStore
 
     if args.scheduler and args.workers is not None:
@@ -94,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         summary = run_batch(
             jobs,
             store,
-            lambda: dask_client(args.scheduler, args.workers),
+            lambda: _client(args.scheduler, args.workers),
             out_dir,
             force=args.force,
             reports=not args.no_reports,

@@ -46,13 +46,15 @@ GRACE_S = 0.5
 EXIT_INTERRUPTED = 130
 
 _received: list[str] = []  # names of the signals received during the current command
+_deferring: list[bool] = []  # one entry per ``deferred`` block the main thread is in
 _discards: list[Callable[[], None]] = []  # what the watchdog removes before it exits
 
 
 def _handle(signum: int, frame: object) -> None:
     name = signal.Signals(signum).name
     _received.append(name)
-    raise Interrupted(f"{name} received")
+    if not _deferring:
+        raise Interrupted(f"{name} received")
 
 
 def check() -> None:
@@ -60,6 +62,19 @@ def check() -> None:
     whose exception was lost on its way through C code)."""
     if _received:
         raise Interrupted(f"{_received[0]} received")
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """A signal received in the block is raised when the block ends (``check``), not inside
+    it: for a step that an exception would leave in a state nothing can clean up (a Dask
+    cluster half started). Keep such blocks to seconds."""
+    _deferring.append(True)
+    try:
+        yield
+    finally:
+        _deferring.pop()
+    check()
 
 
 @contextmanager

@@ -100,9 +100,17 @@ def local_cluster(workers: int) -> Iterator[LocalCluster]:
         try:
             yield cluster
         except KeyboardInterrupt:
-            for nanny in list(cluster.workers.values()):
-                if getattr(nanny, "pid", None):
-                    os.kill(nanny.pid, signal.SIGKILL)
+            # Dask's complaints about the workers killed here are no news to the user.
+            dask_logger = logging.getLogger("distributed")
+            level = dask_logger.level
+            dask_logger.setLevel(logging.CRITICAL)
+            try:
+                for nanny in list(cluster.workers.values()):
+                    if getattr(nanny, "pid", None):
+                        os.kill(nanny.pid, signal.SIGKILL)
+                cluster.close()
+            finally:
+                dask_logger.setLevel(level)
             raise
 
 

@@ -105,3 +105,51 @@ def test_linearize_extreme_parameter_values(work, capsys, line):
     path = work / "extreme.yaml"
     path.write_text(H8.read_text().replace(line, f"{name}: 1.0e+300"))
     refused(["linearize", path], capsys, "extreme.yaml", "1e+300", name.split()[0])
+
+
+#: The numeric options of fit, control, fleet and batch, declared with their range
+#: (``add_number``): (command line without the option, option, a value out of range).
+FIT = ["fit", REC, "--out-dir", "fits"]
+CONTROL = ["control", "--params", H8, "--csv", "c.csv"]
+FLEET_MAKE = ["fleet", "make", "--out", "fleet"]
+OUT_OF_RANGE = [
+    (FIT, "--shooting-interval", "0"),
+    (FIT, "--starts", "0"),
+    (FIT, "--start-seed", "-1"),
+    (FIT, "--max-iterations", "0"),
+    (FIT, "--bound-factor", "1"),
+    (FIT, "--step-tol=-1e-6", "-1e-6"),
+    (FIT, "--defect-tol", "nan"),
+    (FIT, "--identifiability-threshold", "0"),
+    (FIT, "--max-misfit", "inf"),
+    (FIT, "--threads", "0"),
+    ([*CONTROL, "--kp", "1"], "--ki", "-1"),
+    ([*CONTROL, "--kp", "1"], "--kd", "inf"),
+    (CONTROL, "--kp", "-150"),
+    ([*CONTROL, "--kp", "1"], "--motor2-gain-scale", "0"),
+    ([*CONTROL, "--kp", "1"], "--sample-time", "0"),
+    ([*CONTROL, "--kp", "1"], "--delay-samples", "-1"),
+    ([*CONTROL, "--kp", "1"], "--side", "0"),
+    ([*CONTROL, "--kp", "1"], "--v-max", "-0.1"),
+    ([*CONTROL, "--kp", "1"], "--f-a", "0.6"),
+    ([*CONTROL, "--kp", "1", "--trajectory", "points", "--points", "0,0;0.01,0"], "--dwell", "-1"),
+    ([*CONTROL, "--kp", "1"], "--settle", "nan"),
+    ([*CONTROL, "--kp", "1"], "--substeps", "0"),
+    ([*FLEET_MAKE, "--weeks", "2"], "--rigs", "0"),
+    ([*FLEET_MAKE, "--rigs", "1"], "--weeks", "1"),
+    ([*FLEET_MAKE, "--rigs", "1", "--weeks", "2"], "--seed", "-1"),
+    (["fleet", "report", "r.parquet"], "--threshold", "1"),
+    (["batch", "m.yaml", "--results", "r.parquet"], "--workers", "0"),
+]
+
+
+@pytest.mark.parametrize(("argv", "option", "value"), OUT_OF_RANGE)
+def test_numeric_option_out_of_range_of_fit_control_fleet_batch(work, capsys, argv, option, value):
+    given = [option] if "=" in option else [option, value]  # "--opt=-1": argparse's way
+    refused([*argv, *given], capsys, option.split("=")[0], value)
+    assert list(work.iterdir()) == []
+
+
+def test_control_workspace_must_be_finite(work, capsys):
+    argv = [*CONTROL, "--kp", "1", "--workspace", "-0.1", "inf", "-0.1", "0.1"]
+    refused(argv, capsys, "--workspace", "inf")
