@@ -135,7 +135,7 @@ def check_plant(seed: int, work: Path) -> dict:
         if made["exit_status"] != 0 or "predictions" not in made:
             row["error"] = f"{label} design failed"
             return row
-        experiments[label] = (csv, made["predictions"][0]["relative_std"])
+        experiments[label] = (csv, made["predictions"][0]["std_error"])
     layout = Layout(DURATION_S)
     prbs_csv = folder / "prbs.csv"
     prbs_csv.write_text(sequence_text(prbs(layout, MAX_VOLTAGE_V), 1e-3))
@@ -150,9 +150,10 @@ def check_plant(seed: int, work: Path) -> dict:
             "fit_message": result.get("message"),
             "residual_rms": {c: v.get("residual_rms") for c, v in result["channels"].items()},
             "relative_std": relative_std(result, names),
+            "std_error": {n: result["parameters"][n].get("std") for n in names},
         }
         if predicted is not None:
-            row[label]["predicted_relative_std"] = {n: predicted[n] for n in names}
+            row[label]["predicted_std_error"] = {n: predicted[n] for n in names}
     return row
 
 
@@ -164,13 +165,17 @@ def verdicts(row: dict) -> dict:
               ("design", "focus", "prbs")}  # fmt: skip
     median["steps"] = float(np.median(list(row["steps"].values())))
     ratios = np.array(
-        [row["design"]["predicted_relative_std"][n] / s
-         for n, s in row["design"]["relative_std"].items()]
+        [row["design"]["predicted_std_error"][n] / s if s else np.inf
+         for n, s in row["design"]["std_error"].items()]
     )  # fmt: skip
     inside = (ratios >= 1 / PREDICTION_FACTOR) & (ratios <= PREDICTION_FACTOR)
     focus = {n: row["focus"]["relative_std"][n] / row["design"]["relative_std"][n] for n in FOCUS}
     return {
-        "design_limit_events": len(row["design"]["events"]) + len(row["focus"]["events"]),
+        "design_limit_events": sum(
+            e["kind"] == "limit" for k in ("design", "focus") for e in row[k]["events"]
+        ),
+        "prbs_limit_events": sum(e["kind"] == "limit" for e in row["prbs"]["events"]),
+        "step_limit_events": sum(e["kind"] == "limit" for e in row["step_events"]),
         "design_true_travel_m": max(row["design"]["true_travel_m"], row["focus"]["true_travel_m"]),
         "median_relative_std": median,
         "design_over_prbs": median["design"] / median["prbs"],

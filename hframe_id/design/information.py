@@ -20,7 +20,7 @@ along the predicted motion, ``hframe_id.fitting.statistics``) come from the same
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -153,9 +153,12 @@ class Information:
         parameter the experiments carry no information about."""
         return standard_errors(self.matrix if prior is None else self.matrix + prior)
 
-    def std_error(self) -> np.ndarray:
-        """(n_f,) predicted standard errors [SI] of the free parameters (white noise)."""
-        return self.relative_std() * np.abs(self.slopes)
+    def predicted_relative_std(self) -> np.ndarray:
+        """(n_f,) the standard errors of theta a fit would report: per parameter the larger of
+        the white-noise (``relative_std``) and the ``noise-model`` errors, as the fit's
+        ``"robust"`` errors take the larger of its HAC (white residuals: the textbook ones)
+        and noise-model errors."""
+        return np.maximum(self.relative_std(), self.noise_model_relative_std())
 
     def noise_model_relative_std(self) -> np.ndarray:
         """(n_f,) predicted ``noise-model`` standard errors of theta: the fitter's bootstrap
@@ -188,17 +191,32 @@ def standard_errors(info: np.ndarray) -> np.ndarray:
     return std
 
 
-def design_options(free: Sequence[str], base: FitOptions | None = None) -> FitOptions:
-    """The fit's options for predicting a design: ``base`` (default ``FitOptions()``, what
-    ``hframe-id fit`` uses) with the free parameters ``free``."""
-    base = base or FitOptions()
-    return FitOptions(
-        free=tuple(free),
-        channel_std=dict(base.channel_std),
-        shooting_interval=base.shooting_interval,
-        smoothing=base.smoothing,
-        threads=base.threads,
-    )
+def design_options(free: Sequence[str], channel_std: Mapping[str, float] | None = None):
+    """The fit's options for predicting a design: ``hframe-id fit``'s defaults
+    (``FitOptions()``) with the free parameters ``free`` and, if given, the channels' noise
+    std ``channel_std`` (output name -> SI) instead of the sensors'."""
+    return FitOptions(free=tuple(free), channel_std=dict(channel_std or {}))
+
+
+def fitted_channel_std(params: ParameterSet) -> dict[str, float]:
+    """The noise levels a fit that made ``params`` weighted its channels with, when it
+    estimated them from its residuals (``provenance.noise``: the model did not follow the
+    data at the sensors' noise level): output name -> std [SI]; else none (the sensors').
+
+    A fit of a new recording of the same rig will meet the same misfit and weigh by it; a
+    prediction with the sensors' noise would promise it errors 50-3000 x too small (measured
+    on a realistic plant's six steps, docs/studies/2026-11-26-design.md)."""
+    noise = params.provenance.get("noise")
+    if not isinstance(noise, Mapping) or noise.get("weights") != "estimated from the residuals":
+        return {}
+    levels = {}
+    for output, entry in (noise.get("channels") or {}).items():
+        if not isinstance(entry, Mapping):
+            continue
+        for key, value in entry.items():
+            if str(key).startswith("weight_std") and isinstance(value, int | float) and value > 0:
+                levels[str(output)] = float(value)
+    return levels
 
 
 def experiment_information(

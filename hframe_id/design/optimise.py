@@ -39,7 +39,12 @@ import numpy as np
 
 from hframe_id.design.criteria import Criterion
 from hframe_id.design.excitation import Block, Layout, candidate_blocks
-from hframe_id.design.information import Information, design_options, experiment_information
+from hframe_id.design.information import (
+    Information,
+    design_options,
+    experiment_information,
+    fitted_channel_std,
+)
 from hframe_id.errors import OptionError
 from hframe_id.fitting.options import FitOptions
 from hframe_id.parameters import ParameterSet
@@ -159,6 +164,8 @@ class Design:
     motion : per parameter set, the (N, axes) predicted positions [m] of the travel's axes.
     parameter_sets : the file's values and the draws.
     prior : per parameter set, the prior information (ridge and recordings already made).
+    fit_options : the fit's options the predictions were made with (free parameters, and
+        the channels' noise: ``fitted_channel_std``).
     wall_time_s : how long the design took [s].
     """
 
@@ -171,6 +178,7 @@ class Design:
     motion: tuple[np.ndarray, ...]
     parameter_sets: tuple[ParameterSet, ...]
     prior: tuple[np.ndarray, ...]
+    fit_options: FitOptions
     wall_time_s: float
 
 
@@ -289,7 +297,7 @@ def design_experiment(
     limits.check(options.sensors)
     layout = Layout(duration_s, options.sample_period_s)
     names = free_parameters(params, options.free)
-    fit_options = design_options(names)
+    fit_options = design_options(names, fitted_channel_std(params))
     focus_index = options.criterion.indices(names) if options.criterion.focus else None
     sets = parameter_draws(params, names, options.draws, options.seed)
     library = candidate_blocks(limits.max_voltage_v)
@@ -361,6 +369,7 @@ def design_experiment(
         ),
         parameter_sets=tuple(sets),
         prior=tuple(priors),
+        fit_options=fit_options,
         wall_time_s=time.perf_counter() - start,
     )
 

@@ -3,10 +3,11 @@
 For the design, the thesis's six steps, a PRBS and a multisine (``baselines``; the PRBS and
 the multisine of the design's duration and voltage limit), at the file's parameters:
 
-- per free parameter, the predicted standard error [SI] and relative [%]: the fitter's
-  ``noise-model`` errors (encoder quantization and laser noise along the predicted motion,
-  ``Information.noise_model_relative_std``), what ``hframe-id fit`` reports for a model
-  that matches the plant;
+- per free parameter, the predicted standard error [SI] and relative [%]
+  (``Information.predicted_relative_std``): the larger of the textbook errors with the
+  channels' noise (the sensors', or the levels the file's fit estimated from its residuals)
+  and the fitter's ``noise-model`` errors (encoder quantization and laser noise along the
+  predicted motion), as ``hframe-id fit``'s ``robust`` errors;
 - the median relative standard error over the free parameters, and the criterion
   (``criteria``) of each experiment's Fisher information;
 - how far x and y go [m] and the share of laser samples in range.
@@ -25,7 +26,7 @@ import numpy as np
 
 from hframe_id.design.baselines import multisine, prbs, six_steps
 from hframe_id.design.excitation import Layout
-from hframe_id.design.information import Information, design_options, experiment_information
+from hframe_id.design.information import Information, experiment_information
 from hframe_id.design.optimise import Design, DesignOptions, Limits
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
@@ -42,6 +43,11 @@ class Prediction:
     information: Information
     relative_std: np.ndarray
     criterion: float
+
+    @property
+    def std_error(self) -> np.ndarray:
+        """(n_f,) predicted standard errors [SI]."""
+        return self.relative_std * np.abs(self.information.slopes)
 
     @property
     def median_relative_std(self) -> float:
@@ -68,7 +74,7 @@ def predictions(
     """The design's prediction, then the six steps', the PRBS's and the multisine's, at
     ``params`` with the design's free parameters and rig."""
     layout = Layout(design.table.shape[0] * options.sample_period_s, options.sample_period_s)
-    fit_options = design_options(design.information.names)
+    fit_options = design.fit_options
     dt = options.sample_period_s
     others = {
         "six steps (thesis)": six_steps(params.variant, dt),
@@ -86,7 +92,7 @@ def predictions(
 def _prediction(label, info: Information, design: Design, dt: float, focus) -> Prediction:
     duration = sum(o.shape[0] for o in info.outputs) * dt
     value = design.criterion.value(info.matrix + design.prior[0], focus)
-    return Prediction(label, duration, info, info.noise_model_relative_std(), value)
+    return Prediction(label, duration, info, info.predicted_relative_std(), value)
 
 
 def _percent(value: float) -> str:
@@ -106,6 +112,14 @@ def markdown(
     model = build_model(params.variant)
     units = {p.name: p.unit for p in model.parameters}
     info = design.information
+    fitted = dict(design.fit_options.channel_std)
+    noise_text = (
+        "the levels the file's fit estimated from its residuals ("
+        + ", ".join(f"{n} {v:.3g}" for n, v in fitted.items())
+        + " SI)"
+        if fitted
+        else "the sensors' specification"
+    )
     travel = ", ".join(f"{a} {lo:g} to {hi:g} m" for a, (lo, hi) in limits.travel_m.items())
     lines = [
         f"# Experiment design: {csv_name}",
@@ -127,9 +141,11 @@ def markdown(
         "",
         "## Predicted standard errors",
         "",
-        "Standard error [SI] (relative [%]) a fit would report, from the fitter's noise-model",
-        "(encoder quantization and laser noise along the predicted motion), for a model that",
-        "matches the plant; a mismatched plant adds to them. Six steps: 1 s each.",
+        "Standard error [SI] (relative [%]) a fit would report: the larger of the textbook",
+        "error with the channels' noise and the fitter's noise-model error (encoder",
+        "quantization and laser noise along the predicted motion). Channel noise: "
+        + noise_text
+        + ". Six steps: 1 s each.",
         "",
         "| parameter | value | " + " | ".join(r.label for r in rows) + " |",
         "|---" * (2 + len(rows)) + "|",
@@ -137,7 +153,7 @@ def markdown(
     for i, name in enumerate(info.names):
         cells = [f"{name} [{units[name]}]", f"{info.values[i]:.5g}"]
         for r in rows:
-            std = r.relative_std[i] * abs(r.information.slopes[i])
+            std = r.std_error[i]
             cells.append(f"{std:.3g} ({_percent(r.relative_std[i])} %)")
         lines.append("| " + " | ".join(cells) + " |")
     lines += [
@@ -175,6 +191,7 @@ def summary(design: Design, rows: list[Prediction], limits: Limits) -> dict:
                 "relative_std": dict(
                     zip(r.information.names, r.relative_std.tolist(), strict=True)
                 ),
+                "std_error": dict(zip(r.information.names, r.std_error.tolist(), strict=True)),
                 "median_relative_std": r.median_relative_std,
                 "criterion": r.criterion,
                 "reach_m": r.reach_m,
