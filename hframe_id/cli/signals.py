@@ -20,9 +20,10 @@ call into C code (a CasADi simulation of a whole run is one call) would delay it
 as the call lasts. The C-level handler does write the signal's number to a wakeup pipe at
 once (``signal.set_wakeup_fd``), and a watchdog thread reads it: CasADi releases the GIL
 while it computes, so the watchdog runs, and if the main thread has not run the handler
-``GRACE_S`` later it ends the process itself: it removes the outputs staged so far (those
-registered by ``discard_on_exit``), prints the line and exits 130 (``os._exit``: the main
-thread is inside C code and cannot unwind).
+``GRACE_S`` later (and the handler is still this module's: the recorder installs its own,
+which stops a recording cleanly) it ends the process itself: it removes the outputs staged
+so far (those registered by ``discard_on_exit``), prints the line and exits 130
+(``os._exit``: the main thread is inside C code and cannot unwind).
 """
 
 from __future__ import annotations
@@ -98,6 +99,8 @@ def _watch(wakeups: int) -> None:
         time.sleep(GRACE_S)
         if _received:
             continue  # handled: the command is unwinding
+        if any(signal.getsignal(signum) is not _handle for signum in SIGNALS):
+            continue  # a handler of the command's own (the recorder's clean stop)
         for discard in reversed(_discards):
             discard()
         name = signal.Signals(next(iter(ending.intersection(data)))).name
