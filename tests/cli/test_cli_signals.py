@@ -11,6 +11,7 @@ command's progress line shows it is working; the only timed assertion is a gener
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -132,6 +133,17 @@ def test_a_step_still_running_is_announced_unless_quiet(tmp_path, capsys, monkey
     assert second.startswith("simulating 0.05 s of hframe-8 (steps 1,4): done in ")
     assert main([*argv, "--force", "--quiet"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_library_progress_messages_are_lines_unless_quiet(capsys):
+    # The native-code cache announces a long compile on the hframe_id logger.
+    logger = logging.getLogger("hframe_id.native")
+    with progress.library_messages(quiet=False):
+        logger.info("compiling %s (%d kB of C)", "kernel", 570)
+    with progress.library_messages(quiet=True):
+        logger.info("not shown")
+    logger.info("not shown either: outside a command")
+    assert capsys.readouterr().err == "compiling kernel (570 kB of C)\n"
 
 
 def test_an_interrupt_swallowed_in_c_code_still_ends_the_command(tmp_path, capsys, monkeypatch):
