@@ -56,6 +56,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--free", metavar="NAMES", help="comma-separated free parameters (default: the fit's)"
     )
+    parser.add_argument(
+        "--after",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="REC",
+        help="recordings (MCAP) already made of this rig: their information is added, so the "
+        "design brings what they lack (a sequential design)",
+    )
     add_number(
         parser, "--draws", int, at_least=0, default=2, help="parameter sets drawn (default 2)"
     )
@@ -114,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         free=_names(args.free) or None,
         draws=args.draws,
         seed=args.seed,
+        prior_tables=_recorded_inputs(args.after),
     )
     limits = Limits(
         args.max_voltage, travel, TRAVEL_MARGIN_M if args.margin is None else args.margin
@@ -123,6 +133,29 @@ def run(args: argparse.Namespace) -> int:
     params = load_parameter_file(args.params)
     _check_model(params, args.params)
     return _design(args, params, limits, options, out, report_path, plot_path)
+
+
+def _recorded_inputs(paths: list[Path]) -> tuple:
+    """The commanded voltages (N, 2) [V] of the recordings ``paths`` (``--after``)."""
+    import math
+
+    from hframe_id.recordings.reader import read_recording
+
+    tables = []
+    for path in paths:
+        recording = read_recording(path)
+        if tuple(recording.input_names) != ("u1", "u2"):
+            raise OptionError(
+                f"--after {path}: inputs {', '.join(recording.input_names)}, not an H-frame's "
+                "u1, u2"
+            )
+        if not math.isclose(recording.sample_period_s, 1e-3, rel_tol=1e-9):
+            raise OptionError(
+                f"--after {path}: sample period {recording.sample_period_s:g} s; the design's "
+                "is 0.001 s"
+            )
+        tables.append(recording.inputs)
+    return tuple(tables)
 
 
 def _check_model(params, path: str) -> None:

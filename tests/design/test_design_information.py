@@ -2,11 +2,17 @@
 the same Gauss-Newton information, and the noise-model errors agree to the bootstrap's
 sampling error."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from hframe_id.design.excitation import Block, Layout
-from hframe_id.design.information import design_options, experiment_information
+from hframe_id.design.information import (
+    design_options,
+    experiment_information,
+    fitted_channel_std,
+)
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.problem import default_free
 from hframe_id.models import build_model
@@ -75,3 +81,17 @@ def test_laser_samples_out_of_range_carry_no_information(table):
     assert not narrow.valid[0][:, lasers].all() and full.valid[0][:, lasers].all()
     assert narrow.jacobian.shape[0] < full.jacobian.shape[0]
     assert np.all(np.diag(narrow.matrix) < np.diag(full.matrix))
+
+
+def test_a_fit_that_estimated_its_noise_levels_lends_them_to_the_prediction(table):
+    noise = {
+        "weights": "estimated from the residuals",
+        "channels": {
+            "phi1": {"sensor_std [rad]": 5.6e-6, "weight_std [rad]": 0.0176},
+            "x": {"sensor_std [m]": 5e-6, "weight_std [m]": 2.6e-4},
+        },
+    }
+    fitted = replace(table, provenance={"noise": noise})
+    assert fitted_channel_std(fitted) == {"phi1": 0.0176, "x": 2.6e-4}
+    sensors = replace(table, provenance={"noise": {**noise, "weights": "sensor noise"}})
+    assert fitted_channel_std(sensors) == {} and fitted_channel_std(table) == {}

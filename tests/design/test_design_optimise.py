@@ -7,13 +7,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hframe_id.design.baselines import multisine, prbs
+from hframe_id.design.baselines import multisine, prbs, six_steps
 from hframe_id.design.criteria import Criterion
 from hframe_id.design.excitation import Layout, candidate_blocks, sequence_text
 from hframe_id.design.information import design_options, experiment_information
 from hframe_id.design.optimise import (
     MAX_RELATIVE_SPREAD,
     MIN_RELATIVE_SPREAD,
+    RIDGE,
     DesignOptions,
     Limits,
     choose,
@@ -148,3 +149,17 @@ def test_limits_the_rig_cannot_meet_are_refused():
 def test_candidates_stay_within_the_voltage_limit():
     for block in candidate_blocks(6.0):
         assert np.max(np.abs(block.table(100))) <= 6.0
+
+
+def test_recordings_already_made_are_prior_information(table, design):
+    """A sequential design: the six steps' information is the prior; the design is chosen for
+    what they lack, so its own blocks differ and the prior is exactly the steps'."""
+    from tests.design.conftest import LIMITS
+
+    steps = tuple(six_steps("hframe-8", 1e-3))
+    after = design_experiment(table, 1.0, LIMITS, DesignOptions(draws=0, prior_tables=steps))
+    known = experiment_information(table, list(steps), design_options(after.information.names))
+    np.testing.assert_allclose(after.prior[0] - RIDGE * np.eye(len(known.names)), known.matrix)
+    d = Criterion("D")
+    with_prior = d.value(after.information.matrix + after.prior[0])
+    assert with_prior <= d.value(design.information.matrix + after.prior[0]) + 1e-9
