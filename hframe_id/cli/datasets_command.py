@@ -87,6 +87,7 @@ def run_make(args: argparse.Namespace) -> int:
     from hframe_id.rig.datasets import MANIFEST, make_datasets
 
     def report(spec, summary) -> None:
+        signals.check()  # an interrupt swallowed while recording (numpy, CasADi): ends here
         print(f"{spec.file:<20} {summary.samples} samples, truth {spec.truth}, seed {spec.seed}")
 
     out = check_dir(args.out or ("datasets/realistic" if args.realistic else "datasets"), "--out")

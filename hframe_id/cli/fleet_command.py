@@ -7,6 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
+from hframe_id.cli import signals
 from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
 from hframe_id.cli.progress import Progress, add_quiet_option
@@ -89,6 +90,11 @@ def run_make(args: argparse.Namespace) -> int:
     from hframe_id.fleet.synthetic import make_fleet
 
     progress = Progress(args.quiet)
+
+    def recorded(rig: str, week: int) -> None:
+        signals.check()  # an interrupt swallowed while recording (numpy, CasADi): ends here
+        progress.line(f"{rig} week {week}: recorded")
+
     out = check_dir(args.out, "--out", empty=True)
     with written_together() as staging:
         folder = staging.folder(out)
@@ -97,7 +103,7 @@ def run_make(args: argparse.Namespace) -> int:
             args.weeks,
             args.seed,
             folder,
-            lambda rig, week: progress.line(f"{rig} week {week}: recorded"),
+            recorded,
             args.plant,
         )
     print(f"manifest: {out / manifest.name}")
