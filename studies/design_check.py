@@ -8,7 +8,8 @@ plant), as a new rig owner would, all through the command line:
 1. the thesis's six 1 s steps (``standard_designs``), fitted (``hframe-id fit --model
    hframe-8``, default settings but no cross-validation): the parameters a design starts from;
 2. ``hframe-id design`` from that fit, 4 s, 6 V, travel +/-0.2 m on each axis (D-optimal),
-   and again with ``--focus F_c_cart,F_c_bridge``;
+   and again with ``--focus F_c_cart,F_c_bridge``, calibrated on the six steps
+   (``--calibrate``: the misfit factor of ``hframe_id.design.calibration``);
 3. each design, and a PRBS of the same duration and voltage (``hframe_id.design.baselines``),
    recorded and fitted alone.
 
@@ -16,8 +17,8 @@ The issue's checks, per plant: no limit event while recording a design, and its 
 (the plant's own simulation, ``run_plant``) within +/-0.2 m; the median over the free
 parameters of the fit's relative standard error for the design at least 40 % below the
 PRBS's and below the six steps'; the design's predicted standard errors within a factor 1.5
-of the fit's (counted per parameter); the focus design's fitted standard errors of F_c_cart
-and F_c_bridge at most half the D-optimal design's.
+of the fit's (counted per parameter); the focus design's fitted standard errors [SI] of
+F_c_cart and F_c_bridge at most half the D-optimal design's.
 
     python -m studies.design_check --seeds 0 1 --work /tmp/design-check --json out.json
 """
@@ -129,9 +130,10 @@ def check_plant(seed: int, work: Path) -> dict:
             ["design", "--params", steps_fit["parameter_file"], "--duration", str(DURATION_S),
              "--max-voltage", str(MAX_VOLTAGE_V), "--travel", f"x={-TRAVEL_M}:{TRAVEL_M}",
              "--travel", f"y={-TRAVEL_M}:{TRAVEL_M}", "--out", str(csv), "--json", "--force",
-             *extra]
+             "--calibrate", *map(str, steps), *extra]
         )  # fmt: skip
         row[f"{label}_design_s"] = time.perf_counter() - start
+        row[f"{label}_misfit_factor"] = made.get("misfit_factor")
         if made["exit_status"] != 0 or "predictions" not in made:
             row["error"] = f"{label} design failed"
             return row
@@ -169,7 +171,10 @@ def verdicts(row: dict) -> dict:
          for n, s in row["design"]["std_error"].items()]
     )  # fmt: skip
     inside = (ratios >= 1 / PREDICTION_FACTOR) & (ratios <= PREDICTION_FACTOR)
-    focus = {n: row["focus"]["relative_std"][n] / row["design"]["relative_std"][n] for n in FOCUS}
+    focus = {
+        n: (row["focus"]["std_error"][n] or np.nan) / (row["design"]["std_error"][n] or np.nan)
+        for n in FOCUS
+    }
     return {
         "design_limit_events": sum(
             e["kind"] == "limit" for k in ("design", "focus") for e in row[k]["events"]

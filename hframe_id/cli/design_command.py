@@ -65,6 +65,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="recordings (MCAP) already made of this rig: their information is added, so the "
         "design brings what they lack (a sequential design)",
     )
+    parser.add_argument(
+        "--calibrate",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="REC",
+        help="the recordings the --params fit was made from: its reported errors over those "
+        "predicted for them (model error) scale every prediction",
+    )
     add_number(
         parser, "--draws", int, at_least=0, default=2, help="parameter sets drawn (default 2)"
     )
@@ -123,8 +132,9 @@ def run(args: argparse.Namespace) -> int:
         free=_names(args.free) or None,
         draws=args.draws,
         seed=args.seed,
-        prior_tables=_recorded_inputs(args.after),
+        prior_tables=_recorded_inputs(args.after, "--after"),
     )
+    calibration = _recorded_inputs(args.calibrate, "--calibrate")
     limits = Limits(
         args.max_voltage, travel, TRAVEL_MARGIN_M if args.margin is None else args.margin
     )
@@ -132,11 +142,11 @@ def run(args: argparse.Namespace) -> int:
     check_length(args.duration, options.sample_period_s, "--duration")
     params = load_parameter_file(args.params)
     _check_model(params, args.params)
-    return _design(args, params, limits, options, out, report_path, plot_path)
+    return _design(args, params, limits, options, calibration, (out, report_path, plot_path))
 
 
-def _recorded_inputs(paths: list[Path]) -> tuple:
-    """The commanded voltages (N, 2) [V] of the recordings ``paths`` (``--after``)."""
+def _recorded_inputs(paths: list[Path], option: str) -> tuple:
+    """The commanded voltages (N, 2) [V] of the recordings ``paths`` (given with ``option``)."""
     import math
 
     from hframe_id.recordings.reader import read_recording
@@ -146,12 +156,12 @@ def _recorded_inputs(paths: list[Path]) -> tuple:
         recording = read_recording(path)
         if tuple(recording.input_names) != ("u1", "u2"):
             raise OptionError(
-                f"--after {path}: inputs {', '.join(recording.input_names)}, not an H-frame's "
+                f"{option} {path}: inputs {', '.join(recording.input_names)}, not an H-frame's "
                 "u1, u2"
             )
         if not math.isclose(recording.sample_period_s, 1e-3, rel_tol=1e-9):
             raise OptionError(
-                f"--after {path}: sample period {recording.sample_period_s:g} s; the design's "
+                f"{option} {path}: sample period {recording.sample_period_s:g} s; the design's "
                 "is 0.001 s"
             )
         tables.append(recording.inputs)
@@ -172,7 +182,8 @@ def _check_model(params, path: str) -> None:
         )
 
 
-def _design(args, params, limits, options, out: Path, report_path: Path, plot_path: Path) -> int:
+def _design(args, params, limits, options, calibration: tuple, paths: tuple) -> int:
+    from hframe_id.design.calibration import misfit_factor
     from hframe_id.design.excitation import sequence_text
     from hframe_id.design.optimise import design_experiment, free_parameters
     from hframe_id.design.report import markdown, plot, predictions, summary
@@ -181,7 +192,12 @@ def _design(args, params, limits, options, out: Path, report_path: Path, plot_pa
     try:
         free_parameters(params, options.free)
         design = design_experiment(params, args.duration, limits, options)
-        rows = predictions(design, params, limits, options)
+        factor = 1.0
+        if calibration:
+            factor = misfit_factor(
+                params, calibration, design.fit_options, options.sensors, options.sample_period_s
+            )
+        rows = predictions(design, params, limits, options, factor)
     except FitError as err:
         raise OptionError(f"--params {args.params}: {err}") from None
     except FloatingPointError as err:
@@ -189,8 +205,9 @@ def _design(args, params, limits, options, out: Path, report_path: Path, plot_pa
             f"--params {args.params}: the model cannot be simulated at these values or the "
             f"sets drawn around them ({err})"
         ) from None
+    out, report_path, plot_path = paths
     dt = options.sample_period_s
-    text = markdown(design, rows, params, limits, out.name, plot_path.name, dt)
+    text = markdown(design, rows, params, limits, out.name, plot_path.name, dt, factor)
     with written_together() as staging:
         staging.write(out, sequence_text(design.table, dt))
         staging.write(report_path, text)
@@ -200,7 +217,12 @@ def _design(args, params, limits, options, out: Path, report_path: Path, plot_pa
 
         emit(
             "design",
-            {"csv": out, "report": report_path, "plot": plot_path, **summary(design, rows, limits)},
+            {
+                "csv": out,
+                "report": report_path,
+                "plot": plot_path,
+                **summary(design, rows, limits, factor),
+            },
         )
     else:
         lines = [f"wrote {out}, {report_path.name}, {plot_path.name} ({design.wall_time_s:.1f} s)"]

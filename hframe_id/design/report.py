@@ -69,10 +69,15 @@ class Prediction:
 
 
 def predictions(
-    design: Design, params: ParameterSet, limits: Limits, options: DesignOptions
+    design: Design,
+    params: ParameterSet,
+    limits: Limits,
+    options: DesignOptions,
+    misfit_factor: float = 1.0,
 ) -> list[Prediction]:
     """The design's prediction, then the six steps', the PRBS's and the multisine's, at
-    ``params`` with the design's free parameters and rig."""
+    ``params`` with the design's free parameters and rig, their standard errors times
+    ``misfit_factor`` (``calibration``; 1: a model that matches the plant)."""
     layout = Layout(design.table.shape[0] * options.sample_period_s, options.sample_period_s)
     fit_options = design.fit_options
     dt = options.sample_period_s
@@ -82,17 +87,16 @@ def predictions(
         "multisine": [multisine(layout, limits.max_voltage_v)],
     }
     focus = design.criterion.indices(design.information.names) if design.criterion.focus else None
-    result = [_prediction("design", design.information, design, dt, focus)]
+    infos = {"design": design.information}
     for label, tables in others.items():
-        info = experiment_information(params, tables, fit_options, options.sensors, dt)
-        result.append(_prediction(label, info, design, dt, focus))
+        infos[label] = experiment_information(params, tables, fit_options, options.sensors, dt)
+    result = []
+    for label, info in infos.items():
+        duration = sum(o.shape[0] for o in info.outputs) * dt
+        value = design.criterion.value(info.matrix + design.prior[0], focus)
+        std = info.predicted_relative_std() * misfit_factor
+        result.append(Prediction(label, duration, info, std, value))
     return result
-
-
-def _prediction(label, info: Information, design: Design, dt: float, focus) -> Prediction:
-    duration = sum(o.shape[0] for o in info.outputs) * dt
-    value = design.criterion.value(info.matrix + design.prior[0], focus)
-    return Prediction(label, duration, info, info.predicted_relative_std(), value)
 
 
 def _percent(value: float) -> str:
@@ -107,6 +111,7 @@ def markdown(
     csv_name: str,
     plot_name: str,
     sample_period_s: float,
+    misfit_factor: float = 1.0,
 ) -> str:
     """The report's markdown text."""
     model = build_model(params.variant)
@@ -145,6 +150,12 @@ def markdown(
         "error with the channels' noise and the fitter's noise-model error (encoder",
         "quantization and laser noise along the predicted motion). Channel noise: "
         + noise_text
+        + (
+            f". Times {misfit_factor:.3g}, the misfit factor of the recordings the file was "
+            "fitted to (its reported errors over the predicted ones, model error)"
+            if misfit_factor != 1.0
+            else ""
+        )
         + ". Six steps: 1 s each.",
         "",
         "| parameter | value | " + " | ".join(r.label for r in rows) + " |",
@@ -172,9 +183,12 @@ def markdown(
     return "\n".join(lines)
 
 
-def summary(design: Design, rows: list[Prediction], limits: Limits) -> dict:
+def summary(
+    design: Design, rows: list[Prediction], limits: Limits, misfit_factor: float = 1.0
+) -> dict:
     """The ``--json`` payload: the design and every experiment's prediction."""
     return {
+        "misfit_factor": misfit_factor,
         "criterion": design.criterion.describe(),
         "value": design.value,
         "blocks": [b.describe() for b in design.blocks],

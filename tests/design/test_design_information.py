@@ -7,12 +7,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from hframe_id.design.calibration import misfit_factor
 from hframe_id.design.excitation import Block, Layout
 from hframe_id.design.information import (
     design_options,
     experiment_information,
     fitted_channel_std,
 )
+from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.problem import default_free
 from hframe_id.models import build_model
@@ -95,3 +97,24 @@ def test_a_fit_that_estimated_its_noise_levels_lends_them_to_the_prediction(tabl
     assert fitted_channel_std(fitted) == {"phi1": 0.0176, "x": 2.6e-4}
     sensors = replace(table, provenance={"noise": {**noise, "weights": "sensor noise"}})
     assert fitted_channel_std(sensors) == {} and fitted_channel_std(table) == {}
+
+
+def test_misfit_factor_is_the_fits_errors_over_the_predicted_ones(table, inputs, predicted):
+    """A file whose reported errors are 3 x those predicted for its recordings: factor 3; one
+    that reports smaller errors never shrinks the predictions (factor 1)."""
+    std = predicted.predicted_relative_std() * np.abs(predicted.slopes)
+    units = {p.name: p.unit for p in build_model("hframe-8").parameters}
+
+    def reporting(factor):
+        listed = {
+            f"{n} [{units[n]}]": {"estimate": table.values[n], "std_error": factor * s}
+            for n, s in zip(predicted.names, std, strict=True)
+        }
+        return replace(table, uncertainty={"parameters": listed})
+
+    options = design_options(predicted.names)
+    sensors = SensorModel()
+    assert misfit_factor(reporting(3.0), [inputs], options, sensors, 1e-3) == pytest.approx(3.0)
+    assert misfit_factor(reporting(0.5), [inputs], options, sensors, 1e-3) == 1.0
+    with pytest.raises(OptionError, match="--calibrate"):
+        misfit_factor(table, [inputs], options, sensors, 1e-3)
