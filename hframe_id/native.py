@@ -21,8 +21,8 @@ warning, as below). A cache folder that cannot be used (``$HFRAME_ID_CACHE`` nam
 or a folder that cannot be made or written) costs one ``NativeCacheWarning`` line: the
 libraries then go to a private folder of the process, removed when it exits.
 
-A compile that takes more than two seconds is announced on the ``hframe_id.native`` logger, which
-the command line shows as a progress line on stderr (not with ``--quiet``); Ctrl-C or
+A compile still running after two seconds is announced on the ``hframe_id.native`` logger,
+which the command line shows as a progress line on stderr (not with ``--quiet``); Ctrl-C or
 SIGTERM while the compiler runs kills its whole process group before the command ends.
 
 Without a working compiler nothing fails: ``build`` and ``compile_function`` return None, and
@@ -139,7 +139,7 @@ def cache_directory() -> Path:
     return cache_root() / "native"
 
 
-def unusable(folder: Path) -> str | None:
+def _unusable(folder: Path) -> str | None:
     """Why ``folder`` cannot hold the cache (one line: it, or a folder above it, is a file;
     it cannot be made or written), or None if it can. Makes the folder."""
     try:
@@ -157,7 +157,7 @@ def _library_folder() -> Path:
     exits, after one ``NativeCacheWarning``: native code still runs, built afresh in each
     process."""
     folder = cache_directory()
-    reason = unusable(folder)
+    reason = _unusable(folder)
     if reason is None:
         return folder
     global _private
@@ -251,6 +251,25 @@ def _warn_once(reason: str) -> None:
     )
 
 
+def _wait(process: subprocess.Popen, library: Path, source_bytes: int) -> str:
+    """The compiler's stderr once it has ended; a compile still running after
+    ``ANNOUNCE_AFTER_S`` is announced (``logger``, INFO). ``TimeoutExpired`` after
+    ``COMPILE_TIMEOUT_S``."""
+    announce_after_s = min(ANNOUNCE_AFTER_S, COMPILE_TIMEOUT_S)
+    try:
+        return process.communicate(timeout=announce_after_s)[1]
+    except subprocess.TimeoutExpired:
+        if announce_after_s >= COMPILE_TIMEOUT_S:
+            raise
+    logger.info(
+        "compiling %s (%d kB of C) to native code, once: it is kept in %s",
+        library.name.rsplit("-", 1)[0],
+        source_bytes // 1000,
+        library.parent,
+    )
+    return process.communicate(timeout=COMPILE_TIMEOUT_S - announce_after_s)[1]
+
+
 def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -> str | None:
     """Compile ``source`` with ``flags`` into ``library`` (atomically); the reason as one
     line if the compiler fails or times out, else None.
@@ -258,8 +277,7 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
     The compiler runs in a session of its own: on a timeout, Ctrl-C or SIGTERM (any
     exception while waiting) the whole group (driver, cc1, as, ld) is killed, not only the
     driver, whose children would otherwise run on; the terminal's Ctrl-C does not reach the
-    group itself, so it is killed here, before the exception goes on. A compile still running
-    after ``ANNOUNCE_AFTER_S`` is announced (``logger``, INFO).
+    group itself, so it is killed here, before the exception goes on.
     """
     library.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
@@ -278,18 +296,7 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
         except OSError as err:
             return f"{Path(path).name}: {err}"
         try:
-            try:
-                _, stderr = process.communicate(timeout=min(ANNOUNCE_AFTER_S, COMPILE_TIMEOUT_S))
-            except subprocess.TimeoutExpired:
-                if COMPILE_TIMEOUT_S <= ANNOUNCE_AFTER_S:
-                    raise
-                logger.info(
-                    "compiling %s (%d kB of C) to native code, once: it is kept in %s",
-                    library.name.rsplit("-", 1)[0],
-                    len(source) // 1000,
-                    library.parent,
-                )
-                _, stderr = process.communicate(timeout=COMPILE_TIMEOUT_S - ANNOUNCE_AFTER_S)
+            stderr = _wait(process, library, len(source))
         except BaseException as err:
             os.killpg(process.pid, signal.SIGKILL)
             process.communicate()
