@@ -217,7 +217,9 @@ def load_timeout_s() -> float:
     except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value >= 0):
-        raise ModelError(f"HFRAME_ID_LOAD_TIMEOUT must be a number of seconds >= 0, got {text!r}")
+        raise ModelError(
+            f"HFRAME_ID_LOAD_TIMEOUT must be a number of seconds >= 0, got {shown(text)}"
+        )
     return value
 
 
