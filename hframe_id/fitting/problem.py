@@ -558,7 +558,13 @@ def build_problem(
     sensor_std = np.array([default_channel_std(recordings[0], name, model) for name in outputs])
     kinds = output_kinds(model)
     experiments = tuple(_with_initial_state(e, sensor_std, kinds, wanted) for e in experiments)
-    quantization = np.array([encoder_step(recordings[0], name) for name in outputs])
+    # Only an angle the output is (not a speed or a current named phi...) is an encoder's.
+    quantization = np.array(
+        [
+            encoder_step(recordings[0], name) if kind == "position" else 0.0
+            for name, kind in zip(outputs, kinds, strict=True)
+        ]
+    )
     n_unknown = model.n_states * len(experiments) + len(free)
     n_valid = int(sum(e.valid.sum() for e in experiments))
     for e in experiments:
