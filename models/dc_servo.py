@@ -12,10 +12,10 @@ Neither output is a coordinate: the tachometer measures the speed theta' [rad/s]
 the current (g V - K theta') / R [A] (docs/custom-models.md, "Outputs that are not
 coordinates"). Their ``noise_std`` are the sensors' data-sheet noise, used unless a
 recording's rig metadata declare their own. K and R are the motor's data sheet (held); J, B,
-tau_c and the amplifier gain g are fitted. Its catalogue values, the default start of a fit,
-are ``dc-servo-catalogue.yaml``.
+tau_c and the amplifier gain g are fitted. No published parameter set comes with it: a fit
+starts from the user's data-sheet values (``--initial``).
 
-    hframe-id fit --model-file models/dc_servo.py run1.mcap run2.mcap
+    hframe-id fit --model-file models/dc_servo.py --initial servo-catalogue.yaml run1.mcap
 """
 
 from hframe_id.models import Output, ParameterSpec, Signal, declare
@@ -60,7 +60,5 @@ MODEL = declare(
         ParameterSpec("g", "V/V", "amplifier gain"),
     ],
     equations=equations,
-    reference="dc-servo-catalogue.yaml",
-    reference_label="catalogue (data sheet) values",
     fixed=("K", "R"),
 )

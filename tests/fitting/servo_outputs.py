@@ -18,7 +18,7 @@ MODEL_FILE = Path(__file__).resolve().parents[2] / "models" / "dc_servo.py"
 #: The plant: 1.3 x the catalogue's inertia, 1.4 x its viscous and 1.5 x its Coulomb friction,
 #: a gain 10 % low (K and R are the catalogue's: a fit holds them).
 TRUTH = {"J": 2.6e-5, "B": 1.4e-5, "tau_c": 3.0e-3, "K": 0.03, "R": 2.0, "g": 1.8}
-#: The catalogue (models/dc-servo-catalogue.yaml), the start of the fits.
+#: The data sheet's values (a catalogue), the start of the fits.
 CATALOGUE = {"J": 2.0e-5, "B": 1.0e-5, "tau_c": 2.0e-3, "K": 0.03, "R": 2.0, "g": 2.0}
 #: Sensor noise std: a 4096-count encoder's quantization [rad], a tachometer [rad/s] (0.15 %
 #: of the ~330 rad/s top speed), a current shunt [A].
@@ -48,7 +48,6 @@ def servo_model_file(folder: Path, variant: str) -> tuple[str, Path]:
     else:
         name = f"dc-servo-{variant}"
         text = MODEL_FILE.read_text().replace('name="dc-servo"', f'name="{name}"')
-        text = text.replace('reference="dc-servo-catalogue.yaml",', "reference=None,")
         outputs = f"outputs=[{OUTPUTS[variant]}],"
         text = re.sub(r"outputs=\[.*?\n    \],", outputs, text, flags=re.S)
         path = folder / f"{name.replace('-', '_')}.py"
@@ -103,6 +102,4 @@ def servo_recording(name: str, seed: int, n: int = 2000, rig: dict | None = None
 
 def start(name: str, **values: float) -> ParameterSet:
     """The catalogue as a parameter set of model ``name``, with ``values`` replaced."""
-    return ParameterSet(
-        name, {**CATALOGUE, **values}, "catalogue", "models/dc-servo-catalogue.yaml"
-    )
+    return ParameterSet(name, {**CATALOGUE, **values}, "catalogue", "data sheet")

@@ -16,11 +16,12 @@ from hframe_id.cli import main
 from hframe_id.errors import ModelError
 from hframe_id.fitting.problem import output_kinds, state_outputs
 from hframe_id.models import VARIANTS, build_model, load_model_file
-from hframe_id.parameters import load_parameter_file
+from hframe_id.parameters import ParameterSet, save_parameter_file
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
-SERVO = MODELS / "dc_servo.py"
+SERVO = Path(__file__).resolve().parents[2] / "models" / "dc_servo.py"
 VALUES = {"J": 2.6e-5, "B": 1.4e-5, "tau_c": 3.0e-3, "K": 0.03, "R": 2.0, "g": 1.8}
+#: A data sheet's values of the servo.
+CATALOGUE = {"J": 2.0e-5, "B": 1.0e-5, "tau_c": 2.0e-3, "K": 0.03, "R": 2.0, "g": 2.0}
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +60,7 @@ def test_the_output_map_is_in_the_graph_of_the_dynamics(servo):
 
 
 def test_linearize_gives_the_current_its_feedthrough(servo):
-    lin = linearize(load_parameter_file(MODELS / "dc-servo-catalogue.yaml"))
+    lin = linearize(ParameterSet("dc-servo", CATALOGUE, "catalogue", "data sheet"))
     # Catalogue: K 0.03, R 2, g 2: C = [[0, 1], [0, -K / R]], D = [[0], [g / R]].
     np.testing.assert_allclose(lin.C, [[0.0, 1.0], [0.0, -0.015]], rtol=1e-15)
     np.testing.assert_allclose(lin.D, [[0.0], [1.0]], rtol=1e-15)
@@ -67,12 +68,15 @@ def test_linearize_gives_the_current_its_feedthrough(servo):
 
 def test_simulate_writes_each_output_from_the_output_map(servo, tmp_path):
     out = tmp_path / "step.csv"
+    catalogue = save_parameter_file(
+        ParameterSet("dc-servo", CATALOGUE, "catalogue", "data sheet"), tmp_path / "servo.yaml"
+    )
     argv = [
         "simulate",
         "--model-file",
         str(SERVO),
         "--params",
-        str(MODELS / "dc-servo-catalogue.yaml"),
+        str(catalogue),
     ]
     assert main([*argv, "--step", "1,5.0", "--duration", "0.5", "--out", str(out)]) == 0
     table = pd.read_csv(out)
@@ -151,9 +155,7 @@ def test_a_bad_output_is_one_line_naming_the_file_and_the_output(
     tmp_path, capsys, outputs, message
 ):
     text = SERVO.read_text().replace('name="dc-servo"', f'name="bad-{tmp_path.name[-6:]}"')
-    text = "import casadi as ca\n" + text.replace(
-        'reference="dc-servo-catalogue.yaml",', "reference=None,"
-    )
+    text = "import casadi as ca\n" + text
     start = text.index("    outputs=[")
     end = text.index("    ],\n", start) + len("    ],\n")
     path = tmp_path / "bad_servo.py"
