@@ -37,7 +37,7 @@ from hframe_id.parameters import ParameterSet
 from hframe_id.simulation.compiled import maybe_compile
 from hframe_id.simulation.integrators import rk4_function, stable_substeps
 from hframe_id.simulation.open_loop import outputs_of
-from hframe_id.validation.replay import Channels, measured_positions
+from hframe_id.validation.replay import Channels, measured_positions, measured_rates
 
 #: Default window of past samples for the state estimate (the fitter's shooting interval).
 DEFAULT_WINDOW = 10
@@ -176,9 +176,11 @@ def estimate_states(windows: _Windows, x_guess: np.ndarray) -> np.ndarray:
 
 def _state_guess(model: Model, p: np.ndarray, data: Channels, count: int) -> np.ndarray:
     """(count, n_x) start guesses: measured positions (rigid-motion fill), finite-difference
-    velocities."""
+    velocities, or a rate's measurement where a channel measures it (``measured_rates``)."""
     positions = measured_positions(model, p, data)
     velocities = np.gradient(positions, data.sample_period_s, axis=0)
+    rates = measured_rates(model, data)
+    velocities = np.where(np.isfinite(rates), rates, velocities)
     return np.hstack([positions, velocities])[:count]
 
 

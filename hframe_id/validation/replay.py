@@ -124,21 +124,31 @@ def shows_rest(data: Channels) -> bool:
     )
 
 
+def measured_rates(model: Model, data: Channels) -> np.ndarray:
+    """(N, n_q) the coordinates' rates the channels measure (a tachometer) [SI], NaN where no
+    valid sample of a rate channel gives one."""
+    nq = model.n_states // 2
+    rates = np.full((data.measured.shape[0], nq), np.nan)
+    index = state_outputs(model)
+    for j in np.flatnonzero(index >= nq):
+        rates[data.valid[:, j], index[j] - nq] = data.measured[data.valid[:, j], j]
+    return rates
+
+
 def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
     """(n_x,) state at rest (velocities zero, belts unstretched) at the measured positions:
     the mean over the first ``REST_SAMPLES`` where the record shows rest there
     (``shows_rest``; a laser's noise averaged down by sqrt(10)), else the first sample's. A
-    rate a channel measures (a tachometer) starts at its measurement, averaged the same way
-    (zero within its noise at rest)."""
+    rate a channel measures (a tachometer, ``measured_rates``) starts at its measurement,
+    averaged the same way (zero within its noise at rest)."""
     rest = shows_rest(data)
+    nq = model.n_states // 2
     positions = measured_positions(model, p, data)
     x0 = np.zeros(model.n_states)
-    x0[: model.n_states // 2] = positions[:REST_SAMPLES].mean(axis=0) if rest else positions[0]
-    index = state_outputs(model)
-    for j in np.flatnonzero(index >= model.n_states // 2):
-        used = data.valid[: REST_SAMPLES if rest else 1, j]
-        if used.any():
-            x0[index[j]] = float(np.mean(data.measured[: used.size, j][used]))
+    x0[:nq] = positions[:REST_SAMPLES].mean(axis=0) if rest else positions[0]
+    rates = measured_rates(model, data)[: REST_SAMPLES if rest else 1]
+    seen = np.isfinite(rates).any(axis=0)
+    x0[nq:][seen] = np.nanmean(rates[:, seen], axis=0)
     return x0
 
 
