@@ -48,10 +48,11 @@ def test_a_tachometer_speed_alone_or_with_the_angle_recovers_the_rotor(servo, va
     result = fit_recordings(
         [servo_recording(name, 1)], start(name, g=TRUTH["g"]), FitOptions(verbose=0, fix=("g",))
     )
-    # 2000 samples at 0.5 rad/s tachometer noise: measured errors 0.02 % (J), 0.1 % (B),
-    # 0.3 % (tau_c) with the speed alone, 1e-5 with the angle (4096 counts/rev); the limits
-    # are 10-20 standard errors of the speed-only fit and far above the solver's step
-    # tolerance (1e-6 relative), so they test the output map, not the noise draw.
+    # 2000 samples at 0.5 rad/s tachometer noise: measured errors +0.016 % (J), -0.27 % (B),
+    # +0.42 % (tau_c) with the speed alone, standard errors 0.01 %, 0.43 %, 0.43 %; below
+    # 0.002 % with the angle (4096 counts/rev). The limits are 7-50 standard errors of the
+    # speed-only fit and far above the solver's step tolerance (1e-6 relative): they test
+    # the output map, not the noise draw.
     _check_recovered(result, {"J": 0.005, "B": 0.05, "tau_c": 0.03})
 
 
@@ -60,7 +61,8 @@ def test_speed_and_armature_current_recover_the_gain_too(servo):
     # g / R, so the gain is fitted with J, B and tau_c (K and R held, the data sheet's).
     name = servo("shipped")
     result = fit_recordings([servo_recording(name, 2)], start(name), FitOptions(verbose=0))
-    # Measured errors: 5e-5 (J, g), 0.1 % (B), 0.2 % (tau_c); limits as above.
+    # Measured errors: -0.007 % (J), +0.03 % (B), -0.47 % (tau_c), -0.005 % (g), standard
+    # errors 0.011 %, 0.45 %, 0.49 %, 0.007 %; limits as above.
     _check_recovered(result, {"J": 0.005, "B": 0.05, "tau_c": 0.03, "g": 0.005})
 
 
