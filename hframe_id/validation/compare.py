@@ -75,7 +75,7 @@ class ChannelResult:
 
     Attributes
     ----------
-    name, unit : channel (``phi1`` [rad], ``x`` [m], ...).
+    name, unit : channel (``phi1`` [rad], ``x`` [m], ``omega`` [rad/s], ...).
     valid_samples : samples used.
     simulation_fit_percent, prediction_fit_percent : fit [%] (NaN if undefined; prediction
         NaN when skipped).

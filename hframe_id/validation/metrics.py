@@ -14,7 +14,7 @@ def fit_percent(measured: np.ndarray, predicted: np.ndarray, valid: np.ndarray) 
 
     Parameters
     ----------
-    measured, predicted : (N,) one channel, SI [rad or m].
+    measured, predicted : (N,) one channel, in its SI unit (rad, m, rad/s, A, ...).
     valid : (N,) True where the sample counts (measured, predicted both finite).
     """
     use = np.asarray(valid, dtype=bool) & np.isfinite(measured) & np.isfinite(predicted)

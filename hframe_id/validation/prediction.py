@@ -199,7 +199,7 @@ def predict_ahead(
     horizon: int = DEFAULT_HORIZON,
     window: int = DEFAULT_WINDOW,
 ) -> np.ndarray:
-    """(N, n_y) k-step-ahead predictions y_hat(t + k | t) [rad or m], NaN where none exists
+    """(N, n_y) k-step-ahead predictions y_hat(t + k | t) [SI], NaN where none exists
     (the first m + k samples, whose window would start before the record).
 
     Parameters

@@ -99,7 +99,7 @@ def autocorrelation(residual: np.ndarray, valid: np.ndarray, max_lag: int) -> Co
 
     Parameters
     ----------
-    residual : (N,) residual of one channel [rad or m].
+    residual : (N,) residual of one channel [its SI unit].
     valid : (N,) True where the residual is defined.
     max_lag : largest lag L [samples].
     """
@@ -119,7 +119,7 @@ def cross_correlation(
 
     Parameters
     ----------
-    residual : (N,) residual of one channel [rad or m].
+    residual : (N,) residual of one channel [its SI unit].
     valid : (N,) True where the residual is defined.
     signal : (N,) one input [V].
     max_lag : largest |lag| L [samples].
