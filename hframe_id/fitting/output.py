@@ -29,8 +29,8 @@ from typing import Any
 from hframe_id import __version__
 from hframe_id.digests import sha256_file
 from hframe_id.errors import FitError
-from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.report import mismatch_statement, output_units
+from hframe_id.fitting.result import FitResult
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import portable_path, project_root
