@@ -42,6 +42,7 @@ from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
+from hframe_id.fitting.solvers import solver_named
 from hframe_id.fitting.stages import (
     INTERMEDIATE_DEFECT_TOL,
     INTERMEDIATE_STEP_TOL,
@@ -576,8 +577,9 @@ def _solve(
     # Exact continuity from the nodes so far; if that fails (nodes at rest simulated with
     # parameters that are still off, e.g. an unmeasured pulley's stretch at rest), the same
     # fallback as above from the measured nodes: continuity first as a penalty, then exact.
-    # (IPOPT, ``FitOptions.solver``, globalises by itself: no fallback.)
-    for use_penalty in (False, True)[: 1 if options.solver == "ipopt" else 2]:
+    # (Unless the solver globalises by itself: ``Solver.penalty_fallback``.)
+    fallback = solver_named(options.solver).penalty_fallback
+    for use_penalty in (False, True)[: 2 if fallback else 1]:
         start_nodes = measured if use_penalty else nodes
         state = SolverState(start_nodes.copy(), theta.copy(), active.copy(), velocity_hint=velocity)
         if use_penalty:

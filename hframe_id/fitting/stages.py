@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from hframe_id.fitting.nlp import NlpSettings, solve_nlp
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
+from hframe_id.fitting.solvers import Stage, solver_named
 
 #: Fallback stage on the moving windows when exact continuity from the equation-error start
 #: fails: continuity as a penalty (defects in noise units, this weight), a monotone
@@ -39,44 +39,10 @@ PREPASS_COST_RTOL = 1e-4
 
 def exact_stage(gn: GaussNewton, state: SolverState, label: str, **settings) -> StageReport:
     """Every window with exact continuity, to the options' tolerances, by the solver the
-    options name: the Gauss-Newton stage (``settings`` go to ``GaussNewton.run``) or CasADi's
-    IPOPT on the same transcription (``hframe_id.fitting.nlp``). Updates ``state``."""
-    ms = gn.ms
-    problem = ms.problem
-    options = problem.options
-    if options.solver == "gauss-newton":
-        return gn.run(
-            state,
-            label,
-            problem.smoothing,
-            options.max_iterations,
-            options.step_tol,
-            options.defect_tol,
-            **settings,
-        )
-    outcome = solve_nlp(
-        ms,
-        state.nodes,
-        state.theta,
-        state.active,
-        problem.smoothing,
-        NlpSettings(max_iter=options.max_iterations),
-    )
-    state.nodes, state.theta = outcome.nodes, outcome.theta
-    state.evaluation = ms.evaluate(state.nodes, state.theta, problem.smoothing)
-    state.velocity_hint = state.evaluation.states[:, :, ms.nq :]
-    converged = outcome.converged and outcome.max_defect <= options.defect_tol
-    return StageReport(
-        name=f"{label} (IPOPT)",
-        smoothing=problem.smoothing,
-        iterations=outcome.iterations,
-        converged=converged,
-        message=("converged: " if converged else "did not converge: ") + outcome.message,
-        cost=state.evaluation.cost,
-        max_defect=float(np.max(np.abs(ms.defects(state.evaluation, state.nodes)), initial=0)),
-        wall_time_s=outcome.wall_time_s,
-        substeps=state.evaluation.n_substeps,
-    )
+    options name (``fitting.solvers``), from ``state``, which it updates; ``settings`` are the
+    Gauss-Newton solver's own (``GaussNewton.run``)."""
+    solver = solver_named(gn.ms.problem.options.solver)
+    return solver.solve(Stage(label, gn, state, settings))
 
 
 def penalty_stage(

@@ -94,30 +94,6 @@ def test_matched_data_keep_the_sensor_noise_levels():
     assert result.diagnostics["noise"]["method"] == "sensor"
 
 
-def test_ipopt_solver_reaches_the_gauss_newton_optimum():
-    """FitOptions(solver="ipopt"): the all-window stage by CasADi's IPOPT on the same
-    transcription lands on the Gauss-Newton fit (both to step 1e-6 / IPOPT tol 1e-10; 1e-4
-    relative is far above either's convergence and far below any physical difference)."""
-    from hframe_id.recordings.simulated import simulate_recording
-
-    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    u = np.zeros((400, 2))
-    u[50:350] = (-4.0, 4.0)
-    truth = table.replace_values(k_l=table.values["k_l"] * 0.9, b_bridge=30.0)
-    recordings = [simulate_recording(truth, u, seed=5)]
-    fits = {
-        solver: fit_recordings(
-            recordings, table, FitOptions(free=("k_l", "b_bridge"), solver=solver)
-        )
-        for solver in ("gauss-newton", "ipopt")
-    }
-    assert all(f.success for f in fits.values()), [f.message for f in fits.values()]
-    assert "IPOPT" in fits["ipopt"].stages[-1].name
-    for name in ("k_l", "b_bridge"):
-        a, b = (fits[s].estimates[name].estimate for s in fits)
-        assert a == pytest.approx(b, rel=1e-4), name
-
-
 def test_held_parameters_and_their_prior_are_stated():
     """A fit with held table values says which, at what value and with what prior."""
     from hframe_id.fitting.result import FitResult
