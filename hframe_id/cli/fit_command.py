@@ -20,10 +20,10 @@ from hframe_id.fitting.options import (
     CONSIDER_METHODS,
     CONTINUITY,
     NOISE_METHODS,
-    SOLVERS,
     UNCERTAINTY_METHODS,
     FitOptions,
 )
+from hframe_id.fitting.solvers import solver_names
 from hframe_id.resources import datasets_dir
 
 if TYPE_CHECKING:  # the fitting itself (CasADi, SciPy) is imported when a fit runs
@@ -161,10 +161,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--solver",
-        choices=SOLVERS,
+        choices=solver_names(),
         default=FitOptions.solver,
         help="solver of the all-window stages: the condensed Gauss-Newton, or CasADi's "
-        "IPOPT (nlpsol, exact Gauss-Newton Hessian) on the same transcription",
+        "IPOPT or SQP (nlpsol, exact Gauss-Newton Hessian) on the same transcription",
     )
     parser.add_argument(
         "--latency",

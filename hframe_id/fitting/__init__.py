@@ -13,12 +13,13 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from hframe_id.fitting.fit import FitResult, ParameterEstimate, fit_recordings
+    from hframe_id.fitting.fit import fit_recordings
     from hframe_id.fitting.options import FitOptions, FitProgress
+    from hframe_id.fitting.result import FitResult, ParameterEstimate
 
 _HOMES = {
-    "FitResult": "hframe_id.fitting.fit",
-    "ParameterEstimate": "hframe_id.fitting.fit",
+    "FitResult": "hframe_id.fitting.result",
+    "ParameterEstimate": "hframe_id.fitting.result",
     "fit_recordings": "hframe_id.fitting.fit",
     "FitOptions": "hframe_id.fitting.options",
     "FitProgress": "hframe_id.fitting.options",

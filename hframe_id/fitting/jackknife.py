@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from hframe_id.fitting.fit import FitResult, spread
+from hframe_id.fitting.result import FitResult, spread
 from hframe_id.validation.cross_validation import LeaveOneOutTable
 
 

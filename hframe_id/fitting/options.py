@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from hframe_id.errors import OptionError
+from hframe_id.fitting.solvers import solver_names
 
 #: Prior relative std of a table value held in a fit (``FitOptions.consider``): the spread
 #: between the thesis's own tables and between rigs is 10-20 % (Tables 2.1/2.3, 4.1/4.2).
@@ -21,7 +22,6 @@ HELD_PRIOR_RELATIVE_STD = 0.2
 
 UNCERTAINTY_METHODS = ("robust", "noise-model", "hac", "gauss-newton")
 NOISE_METHODS = ("auto", "sensor", "estimate")
-SOLVERS = ("gauss-newton", "ipopt")
 CONTINUITY = ("exact", "none")
 #: Transcription of a model that declares no ``fit_defaults``: windows of 10 samples (a
 #: node every 10 ms at 1 kHz) joined into one simulated trajectory.
@@ -152,10 +152,12 @@ class FitOptions:
         penalty on log p, centred on the start value: a maximum a posteriori fit, whose
         intervals are the posterior's; parameters held later for identifiability still get
         the linear consider covariance).
-    solver : the solver of the all-window stages: ``"gauss-newton"`` (default: the condensed
-        Gauss-Newton of ``hframe_id.fitting.solver``) or ``"ipopt"`` (CasADi ``nlpsol`` with
-        an exact Gauss-Newton Hessian on the same transcription, ``hframe_id.fitting.nlp``;
-        ~19x slower on the shipped six steps, reaching the same optimum). The start stages
+    solver : the solver of the all-window stages, by name (``hframe_id.fitting.solvers``,
+        where others are registered): ``"gauss-newton"`` (default: the condensed
+        Gauss-Newton of ``hframe_id.fitting.solver``), ``"ipopt"`` or ``"sqpmethod"`` (CasADi
+        ``nlpsol`` with an exact Gauss-Newton Hessian on the same transcription,
+        ``hframe_id.fitting.nlp``; IPOPT ~19x slower on the shipped six steps, reaching the
+        same optimum). The start stages
         (equation error, moving windows) are Gauss-Newton either way.
     noise : how each channel is weighted. ``"sensor"``: by ``channel_std`` or the rig's
         noise model; ``"estimate"``: by noise levels estimated from the residuals (maximum
@@ -365,8 +367,10 @@ class FitOptions:
                 f"consider_method must be one of {', '.join(CONSIDER_METHODS)}, "
                 f"got {self.consider_method!r}"
             )
-        if self.solver not in SOLVERS:
-            raise OptionError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        if self.solver not in solver_names():
+            raise OptionError(
+                f"solver must be one of {', '.join(solver_names())}, got {self.solver!r}"
+            )
         if self.initial_state not in INITIAL_STATES:
             raise OptionError(
                 f"initial_state must be one of {', '.join(INITIAL_STATES)}, "

@@ -29,8 +29,9 @@ from typing import Any
 from hframe_id import __version__
 from hframe_id.digests import sha256_file
 from hframe_id.errors import FitError
-from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.report import mismatch_statement, output_units
+from hframe_id.fitting.result import FitResult
+from hframe_id.fitting.solvers import solver_named
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.resources import portable_path, project_root
@@ -124,12 +125,7 @@ def provenance(
         },
         "initial_source": str(initial_path) if initial_path else result.initial.source,
         "solver": {
-            "method": "multiple shooting, "
-            + (
-                "IPOPT (CasADi nlpsol, Gauss-Newton Hessian)"
-                if result.options.solver == "ipopt"
-                else "Gauss-Newton on the lifted problem (CasADi)"
-            ),
+            "method": "multiple shooting, " + solver_named(result.options.solver).description,
             "success": bool(result.success),
             "message": result.message,
             "iterations": int(result.iterations),

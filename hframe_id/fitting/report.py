@@ -27,8 +27,8 @@ import numpy as np
 
 from hframe_id.atomic import replace_atomically, staged_directory
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
-from hframe_id.fitting.fit import MISMATCH_RMS, FitResult
 from hframe_id.fitting.multistart import reached_best
+from hframe_id.fitting.noise_rounds import MISMATCH_RMS
 from hframe_id.fitting.problem import applied_inputs
 from hframe_id.fitting.report_figures import (
     ExperimentSignals,
@@ -36,6 +36,7 @@ from hframe_id.fitting.report_figures import (
     plot_experiment,
     shown_in,
 )
+from hframe_id.fitting.result import FitResult
 from hframe_id.models import build_model, declaration
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.parameters.reduce import reduce_to_hframe8

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -198,6 +199,16 @@ class GaussNewton:
     def prox(self) -> np.ndarray:
         """The proximal weights in use: ``set_smoothing``'s unit times the adapted scale."""
         return self.prox_unit * self.prox_scale
+
+    def rescale_channels(self, ev: Evaluation, factors: np.ndarray) -> None:
+        """Multiply each output channel's weight by ``factors`` (n_y,): the transcription's
+        weights (a new array: transcriptions sharing the old one keep it) and, in place,
+        ``ev``'s residuals and their Jacobians (the same samples under the new weights)."""
+        self.ms.weight = self.ms.weight * factors
+        ev.residual *= factors
+        if ev.jac_node is not None:
+            ev.jac_node *= factors[:, None]
+            ev.jac_theta *= factors[:, None]
 
     def _evaluate(self, state: SolverState, nodes, theta, smoothing) -> Evaluation:
         self.evaluations += 1
@@ -485,6 +496,7 @@ class GaussNewton:
         watchdog: bool = True,
         give_up: int | None = None,
         stall_defect_tol: float = STALL_DEFECT_TOL,
+        reweight: Callable[[Evaluation], np.ndarray | None] | None = None,
     ) -> StageReport:
         """Iterate one stage until converged; updates ``state`` in place.
 
@@ -504,6 +516,10 @@ class GaussNewton:
         levels are estimated from the residuals (model error) the caller passes
         ``defect_tol`` (no such acceptance): defects of 2 estimated std let a discontinuous
         trajectory follow data its model cannot.
+
+        ``reweight`` (monotone stages): called at every accepted iterate with its evaluation;
+        it returns factors (n_y,) for the channels' weights, or None to keep them. Re-weighted,
+        the merit is another function: the best iterate and the cost history restart there.
         """
         start = time.perf_counter()
         ms = self.ms
@@ -665,7 +681,14 @@ class GaussNewton:
                 state.evaluation = ev
                 state.velocity_hint = ev.states[:, :, ms.nq :]
                 value = merit(ev, state.nodes)
-                if not monotone and iterations <= FREE_STEPS:
+                factors = None if reweight is None else reweight(ev)
+                if factors is not None:
+                    self.rescale_channels(ev, factors)
+                    best = (merit(ev, state.nodes), state.nodes, state.theta, ev)
+                    since_best = 0
+                    best_history.clear()
+                    costs.clear()
+                elif not monotone and iterations <= FREE_STEPS:
                     best = (value, state.nodes, state.theta, ev)
                     since_best = 0
                 elif value < best[0]:

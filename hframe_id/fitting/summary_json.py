@@ -33,8 +33,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from hframe_id.fitting.fit import FitResult
 from hframe_id.fitting.multistart import reached_best
+from hframe_id.fitting.result import FitResult
 
 
 def _number(value: float) -> float | None:

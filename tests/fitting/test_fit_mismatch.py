@@ -94,33 +94,9 @@ def test_matched_data_keep_the_sensor_noise_levels():
     assert result.diagnostics["noise"]["method"] == "sensor"
 
 
-def test_ipopt_solver_reaches_the_gauss_newton_optimum():
-    """FitOptions(solver="ipopt"): the all-window stage by CasADi's IPOPT on the same
-    transcription lands on the Gauss-Newton fit (both to step 1e-6 / IPOPT tol 1e-10; 1e-4
-    relative is far above either's convergence and far below any physical difference)."""
-    from hframe_id.recordings.simulated import simulate_recording
-
-    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    u = np.zeros((400, 2))
-    u[50:350] = (-4.0, 4.0)
-    truth = table.replace_values(k_l=table.values["k_l"] * 0.9, b_bridge=30.0)
-    recordings = [simulate_recording(truth, u, seed=5)]
-    fits = {
-        solver: fit_recordings(
-            recordings, table, FitOptions(free=("k_l", "b_bridge"), solver=solver)
-        )
-        for solver in ("gauss-newton", "ipopt")
-    }
-    assert all(f.success for f in fits.values()), [f.message for f in fits.values()]
-    assert "IPOPT" in fits["ipopt"].stages[-1].name
-    for name in ("k_l", "b_bridge"):
-        a, b = (fits[s].estimates[name].estimate for s in fits)
-        assert a == pytest.approx(b, rel=1e-4), name
-
-
 def test_held_parameters_and_their_prior_are_stated():
     """A fit with held table values says which, at what value and with what prior."""
-    from hframe_id.fitting.fit import FitResult
+    from hframe_id.fitting.result import FitResult
 
     result = FitResult.__new__(FitResult)
     result.diagnostics = {"consider": {"held_relative_std": {"J_2": 0.2}}}
@@ -235,22 +211,22 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
     the mismatch study: round 5 of 5 stalled with defects of 0.022 std, the fit failed, round
     4 had converged). With no converged round to fall back on the fit still fails. Here the
     last round is made to stall by replacing its stage report."""
-    from hframe_id.fitting import fit as fit_module
+    from hframe_id.fitting import noise_rounds
 
-    real_warm_solve = fit_module._warm_solve
+    real_warm_solve = noise_rounds.warm_solve
     rounds = []
 
-    def warm_solve(ms, nodes, theta, active, stages, counter, progress, label):
-        state, gn = real_warm_solve(ms, nodes, theta, active, stages, counter, progress, label)
+    def warm_solve(ms, start, stages, counter, progress, label, levels=None):
+        state, gn = real_warm_solve(ms, start, stages, counter, progress, label, levels)
         names = ms.problem.model.parameter_names
         rounds.append(dict(zip(names, ms.problem.parameters(state.theta), strict=True)))
         if len(rounds) == stalled_round:
             stages[-1] = replace(stages[-1], converged=False, message="stalled (by the test)")
         return state, gn
 
-    monkeypatch.setattr(fit_module, "MAX_NOISE_ROUNDS", stalled_round)
-    monkeypatch.setattr(fit_module, "NOISE_RTOL", 0.0)  # every round runs
-    monkeypatch.setattr(fit_module, "_warm_solve", warm_solve)
+    monkeypatch.setattr(noise_rounds, "MAX_NOISE_ROUNDS", stalled_round)
+    monkeypatch.setattr(noise_rounds, "NOISE_RTOL", 0.0)  # every round runs
+    monkeypatch.setattr(noise_rounds, "warm_solve", warm_solve)
     table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
     options = FitOptions(free=("k_l", "k_r", "M_cart", "M_bridge", "b_cart", "b_bridge"))
     result = fit_recordings(realistic_steps, table, options)
@@ -260,7 +236,7 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
         assert not result.success and "stalled (by the test)" in result.message
         return
     assert result.success, result.message
-    assert result.stages[-1].name == fit_module.REJECTED_ROUND_STAGE
+    assert result.stages[-1].name == noise_rounds.REJECTED_ROUND_STAGE
     assert f"noise round {stalled_round - 1}'s optimum" in result.message
     for name in result.free_names:
         assert result.parameters.values[name] == pytest.approx(

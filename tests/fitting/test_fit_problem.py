@@ -79,7 +79,7 @@ def test_theta_of_inverts_parameters(hframe, recording):
 
 
 def test_at_a_bound_means_within_a_tenth_of_a_standard_error():
-    from hframe_id.fitting.fit import is_at_bound
+    from hframe_id.fitting.estimates import is_at_bound
 
     lower, upper = math.log(0.1), math.log(10.0)
     assert is_at_bound(lower, lower, upper, 1e-6)  # on it

@@ -1,0 +1,93 @@
+"""A fit's all-window stage as an unconstrained least-squares problem (single shooting).
+
+The unknowns are z = (each experiment's estimated initial-state entries [SI], in experiment
+order; then the active free log-parameters theta = ln(p / p0)). The residuals r(z) are the
+noise-weighted output errors of every record simulated from its initial state (the
+transcription's windows chained: continuity holds by construction), with the priors' rows;
+the Jacobian is the single-shooting one the statistics read
+(``GaussNewton.condensed_jacobian``). Any least-squares solver can minimise 1/2 |r(z)|^2
+over it (examples/scipy_solver.py plugs in SciPy's ``least_squares``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hframe_id.errors import OptionError
+from hframe_id.fitting.shooting import Evaluation, MultipleShooting
+from hframe_id.fitting.solver import GaussNewton, SolverState
+
+
+class SingleShooting:
+    """Residuals and Jacobian of the stage that ``state`` starts (``ms``: its transcription).
+
+    ``start()`` is z at ``state``, ``bounds()`` the box of z (the parameters' bounds; the
+    states unbounded), ``residual(z)`` and ``jacobian(z)`` share one evaluation per point,
+    and ``finish(z)`` leaves the point in ``state`` (nodes simulated from its initial states).
+    """
+
+    def __init__(self, ms: MultipleShooting, state: SolverState):
+        if ms.transcription.continuity != "exact":
+            raise OptionError(
+                "single shooting needs one trajectory per record (continuity 'exact'), "
+                f"got continuity {ms.transcription.continuity!r}"
+            )
+        self.ms = ms
+        self.state = state
+        self.smoothing = ms.problem.smoothing
+        self.estimated = ms.estimated_initial_states  # (experiments, n_x)
+        self.active = state.active.copy()
+        self._linearisation = GaussNewton(ms)
+        self._last: tuple[bytes, Evaluation, np.ndarray] | None = None
+        self.evaluations = 0
+
+    def start(self) -> np.ndarray:
+        """z at the stage's start."""
+        first = self.state.nodes[self.ms.first_window]
+        return np.concatenate([first[self.estimated], self.state.theta[self.active]])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of z: -inf/inf for the initial states, the parameters' box."""
+        problem = self.ms.problem
+        n = int(np.count_nonzero(self.estimated))
+        lower = np.concatenate([np.full(n, -np.inf), problem.theta_lower[self.active]])
+        upper = np.concatenate([np.full(n, np.inf), problem.theta_upper[self.active]])
+        return lower, upper
+
+    def point(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(nodes (W, n_x) [SI], theta (n_f,)) of ``z``: each record simulated from its
+        initial state, the inactive parameters as in the start."""
+        z = np.asarray(z, dtype=float)
+        n = int(np.count_nonzero(self.estimated))
+        theta = self.state.theta.copy()
+        theta[self.active] = z[n:]
+        nodes = self.state.nodes.copy()
+        first = self.ms.first_window
+        initial = nodes[first]
+        initial[self.estimated] = z[:n]
+        nodes[first] = initial
+        known = np.zeros(self.ms.n_windows, dtype=bool)
+        known[first] = True
+        return self.ms.fill_nodes(nodes, known, theta, self.smoothing), theta
+
+    def _evaluated(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = np.asarray(z, dtype=float).tobytes()
+        if self._last is None or self._last[0] != key:
+            nodes, theta = self.point(z)
+            ev = self.ms.evaluate(nodes, theta, self.smoothing)
+            jac, residual, _ = self._linearisation.condensed_jacobian(ev, nodes, self.active)
+            self._last = (key, residual, jac)
+            self.evaluations += 1
+        return self._last[1], self._last[2]
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        """r(z): the weighted residuals of the valid samples, then the priors' [-]."""
+        return self._evaluated(z)[0]
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray:
+        """dr/dz (rows as ``residual``, columns as z)."""
+        return self._evaluated(z)[1]
+
+    def finish(self, z: np.ndarray) -> None:
+        """Leave the point ``z`` in the stage's state."""
+        self.state.nodes, self.state.theta = self.point(z)
