@@ -115,10 +115,11 @@ def parameter_estimates(problem, state, stats, held) -> tuple[dict, list[str], l
     return estimates, at_bound, at_box
 
 
-def fit_result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
+def fit_result(problem, ms, gn, state, stages, stats, held, start, regression=None) -> FitResult:
     """The ``FitResult`` of a solve that ended at ``state`` after ``stages``; ``held``: the
     parameters held for identifiability (``parameter_estimates``), ``start`` the
-    ``time.perf_counter()`` the fit began at."""
+    ``time.perf_counter()`` the fit began at, ``regression`` the equation-error estimate's
+    (theta, seconds) or None."""
     options = problem.options
     final = stages[-1]
     p = problem.parameters(state.theta)
@@ -176,6 +177,7 @@ def fit_result(problem, ms, gn, state, stages, stats, held, start) -> FitResult:
         experiment_names=tuple(e.name for e in problem.experiments),
         evaluations=gn.evaluations,
         problem=problem,
+        equation_error=None if regression is None else regression[0],
         diagnostics={
             "channel_std": dict(
                 zip(problem.output_names, problem.channel_std.tolist(), strict=True)

@@ -202,14 +202,14 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
     and the user's ``FitOptions.known_points``, each with the start's fixed parameters and its
     free values clipped into the user's bounds; sets equal in their free values once."""
     problem = result.problem
-    ms = MultipleShooting(problem)
-    ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
+    regressed = result.equation_error
+    if regressed is None:
+        ms = MultipleShooting(problem)
+        ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
+        regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
     thetas = [
         ("the start", np.zeros(len(problem.free))),
-        (
-            "the equation-error estimate",
-            equation_error_start(problem, ms.measured_positions, ms.measured_usable),
-        ),
+        ("the equation-error estimate", regressed),
         *((label, problem.theta_of(p)) for label, p in reference_sets(initial.variant)),
         *(
             (f"known point {i + 1} ({p.title})", problem.theta_of(p))

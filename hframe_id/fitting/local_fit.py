@@ -150,6 +150,12 @@ def fit_in_box(
     nodes, velocity = ms.initial_nodes(problem.p_initial)
     stages: list[StageReport] = []
     counter = {"evaluations": 0}
+    # The equation-error regression (theta, seconds), once for every attempt and for the
+    # known points (``FitResult.equation_error``).
+    regression = None
+    if options.first_stage:
+        theta = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+        regression = (theta, time.perf_counter() - start)
     # One-axis (a coordinate no output measures): first with the node states estimated at
     # the parameters held (converges from the truth on fresh plants, where the path from the
     # measured nodes left it); if that fails, the path from the measured nodes (which fits
@@ -158,7 +164,9 @@ def fit_in_box(
     attempts = [True, False] if unmeasured else [False]
     best = None
     for prepass in attempts:
-        outcome = _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass)
+        outcome = _attempt(
+            problem, ms, nodes, velocity, stages, counter, progress, prepass, regression
+        )
         state, gn, stats, held = outcome
         if stages[-1].converged or stages[-1].name == DEFERRED_STAGE:
             best = outcome
@@ -171,7 +179,9 @@ def fit_in_box(
             problem, ms, nodes, velocity, stages, counter, progress, best
         )
     if may_widen:
-        early = fit_result(problem, ms, best[1], best[0], stages, best[2], best[3], start)
+        early = fit_result(
+            problem, ms, best[1], best[0], stages, best[2], best[3], start, regression
+        )
         if early.diagnostics["at_default_box"]:
             return early
     sensor_std = problem.channel_std.copy()
@@ -186,7 +196,7 @@ def fit_in_box(
         best = (state, gn, _stats(gn, state, problem), {})
     state, gn, stats, held = best
     gn.evaluations = counter["evaluations"]
-    result = fit_result(problem, ms, gn, state, stages, stats, held, start)
+    result = fit_result(problem, ms, gn, state, stages, stats, held, start, regression)
     result.diagnostics["noise"] = noise_report(
         problem, sensor_std, result.diagnostics["channel_rms"], rounds, settling
     )
@@ -314,16 +324,17 @@ def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting
     return [f for f, i in enumerate(problem.free) if i in coupled]
 
 
-def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
-    """Equation-error start, output-error stages and the identifiability holds, from the
-    given start (with the state-estimation pre-pass if ``prepass``)."""
+def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, regression):
+    """Equation-error start (``regression``: its theta and the seconds it took, or None),
+    output-error stages and the identifiability holds, from the given start (with the
+    state-estimation pre-pass if ``prepass``)."""
     options = problem.options
     start = time.perf_counter()
     n_free = len(problem.free)
     theta = np.zeros(n_free)
     smoothing = problem.smoothing
-    if options.first_stage:
-        regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+    if regression is not None:
+        regressed, seconds = regression
         # Keep the regression only if it fits the data better than the given start does
         # (both judged by the output error of independent shooting windows: one evaluation
         # each). It is biased and can be poor where a coordinate is not measured.
@@ -347,7 +358,7 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass):
         used = bool(np.isfinite(costs[1]) and costs[1] < costs[0])
         if used:
             theta = regressed
-        stages.append(_equation_error_report(time.perf_counter() - start, used))
+        stages.append(_equation_error_report(seconds + time.perf_counter() - start, used))
     active = np.ones(n_free, dtype=bool)
     state, gn = _solve(
         problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass, True

@@ -207,7 +207,7 @@ class FitOptions:
     max_misfit : a converged fit whose residual rms exceeds this many standard deviations
         of the sensors' noise (``channel_std`` or the rig's specification; never a level
         estimated from the residuals) is reported as failed: a local optimum far from the
-        data, or a model that cannot follow it. None (default): 5 (``fit.DEFAULT_MAX_MISFIT``:
+        data, or a model that cannot follow it. None (default): 5 (``local_fit.DEFAULT_MAX_MISFIT``:
         far above a correct fit on sim-rig data, 1.0-1.3, far below the wrong optima measured
         on one-axis data, 10-45) for a fit weighted by the sensors' noise, and no limit for
         one that estimated its noise levels (model mismatch, judged against the points the

@@ -80,6 +80,9 @@ class FitResult:
     experiment_names: tuple[str, ...] = ()
     evaluations: int = 0
     problem: FitProblem | None = field(default=None, repr=False)
+    #: (n_f,) theta of the equation-error estimate relative to ``problem``'s start (None: the
+    #: fit had no first stage); a point the fit knows (``fit._known_candidates``).
+    equation_error: np.ndarray | None = field(default=None, repr=False)
     diagnostics: dict[str, Any] = field(default_factory=dict)
 
     @property
