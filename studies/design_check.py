@@ -20,7 +20,11 @@ PRBS's and below the six steps'; the design's predicted standard errors within a
 of the fit's (counted per parameter); the focus design's fitted standard errors [SI] of
 F_c_cart and F_c_bridge at most half the D-optimal design's.
 
+With ``--matched``, a control first: Table 4.2's hframe-8 itself as the sim rig's plant (the
+model matches the plant; the predictions should hold there).
+
     python -m studies.design_check --seeds 0 1 --work /tmp/design-check --json out.json
+    python -m studies.design_check --matched --seeds --work /tmp/design-matched
 """
 
 from __future__ import annotations
@@ -37,12 +41,18 @@ import numpy as np
 from hframe_id.design.baselines import prbs
 from hframe_id.design.excitation import Layout, sequence_text
 from hframe_id.fitting.designs import standard_designs
+from hframe_id.models import build_model
+from hframe_id.parameters import ParameterSet, load_parameter_file
+from hframe_id.recordings.sensors import SensorModel
+from hframe_id.resources import model_file
 from hframe_id.rig.plant import save_plant_file
 from hframe_id.rig.protocols import load_sequence_csv
 from hframe_id.rig.realistic import run_plant
+from hframe_id.simulation.open_loop import simulate
 from studies.unseen_plants import build_plant, draw_plant
 
 ROOT = Path(__file__).resolve().parents[1]
+TABLE_4_2 = model_file("hframe-8-table4.2.yaml")
 CLI = [str(ROOT / ".venv" / "bin" / "hframe-id")]
 DURATION_S = 4.0
 MAX_VOLTAGE_V = 6.0
@@ -64,10 +74,11 @@ def run(argv: list[str]) -> dict:
     return payload
 
 
-def record(plant_file: Path, csv: Path, out: Path, seed: int) -> dict:
-    """``hframe-id record`` of the CSV sequence on the sim rig with the plant."""
+def record(plant: list[str], csv: Path, out: Path, seed: int) -> dict:
+    """``hframe-id record`` of the CSV sequence on the sim rig with the plant ``plant``
+    (``["--plant", FILE]``, or ``["--params", FILE]``: the model itself)."""
     return run(
-        ["record", "--rig", "sim", "--plant", str(plant_file), "--protocol", "csv",
+        ["record", "--rig", "sim", *plant, "--protocol", "csv",
          "--csv", str(csv), "--fast", "--seed", str(seed), "--out", str(out), "--json",
          "--quiet", "--force"]
     )  # fmt: skip
@@ -92,26 +103,45 @@ def relative_std(fitted: dict, names: list[str]) -> dict[str, float]:
 
 
 def true_travel(plant, csv: Path) -> float:
-    """Largest |x| or |y| [m] of the plant's own motion under the CSV sequence."""
+    """Largest |x| or |y| [m] of the plant's own motion under the CSV sequence (a
+    ``ParameterSet``: the model's, through the DAC)."""
     table = load_sequence_csv(csv).table(1e-3)
+    if isinstance(plant, ParameterSet):
+        return float(np.max(np.abs(simulated_positions(plant, table))))
     outputs = run_plant(plant, table).outputs
     names = [s.name for s in plant.model.outputs]
     return float(np.max(np.abs(outputs[:, [names.index("x"), names.index("y")]])))
 
 
-def check_plant(seed: int, work: Path) -> dict:
-    """The study's row for the plant of ``seed``."""
-    draw = draw_plant(seed)
-    plant = build_plant(draw)
-    folder = work / f"seed-{seed}"
+def simulated_positions(params: ParameterSet, table: np.ndarray) -> np.ndarray:
+    """(N, 2) x and y [m] of the model at ``params`` under ``table`` [V] through the DAC."""
+    model = build_model(params.variant)
+    p = model.parameter_vector(params.values)
+    states = simulate(model, p, SensorModel().dac(table), 1e-3)[:-1]
+    outputs = np.array(model.output.map(states.shape[0])(states.T)).T
+    names = [s.name for s in model.outputs]
+    return outputs[:, [names.index("x"), names.index("y")]]
+
+
+def check_plant(seed: int | None, work: Path) -> dict:
+    """The study's row for the plant of ``seed`` (None: the control, Table 4.2's hframe-8
+    as the plant: a model that matches it)."""
+    folder = work / (f"seed-{seed}" if seed is not None else "matched")
     folder.mkdir(parents=True, exist_ok=True)
-    plant_file = save_plant_file(plant, folder / "plant.yaml", overwrite=True)
-    row: dict = {"seed": seed, "plant": draw.describe()}
+    if seed is None:
+        plant = load_parameter_file(TABLE_4_2)
+        source = ["--params", str(TABLE_4_2)]
+        row: dict = {"seed": "matched", "plant": "hframe-8 Table 4.2 (the fitted model)"}
+    else:
+        draw = draw_plant(seed)
+        plant = build_plant(draw)
+        source = ["--plant", str(save_plant_file(plant, folder / "plant.yaml", overwrite=True))]
+        row = {"seed": seed, "plant": draw.describe()}
     steps = []
     for i, design in enumerate(standard_designs("hframe-8", 1e-3)):
         csv = folder / f"{design.name}.csv"
         csv.write_text(sequence_text(design.inputs, 1e-3))
-        rec = record(plant_file, csv, folder / f"{design.name}.mcap", seed=i)
+        rec = record(source, csv, folder / f"{design.name}.mcap", seed=i)
         steps.append(folder / f"{design.name}.mcap")
         row.setdefault("step_events", []).extend(rec.get("events", []))
     start = time.perf_counter()
@@ -143,7 +173,7 @@ def check_plant(seed: int, work: Path) -> dict:
     prbs_csv.write_text(sequence_text(prbs(layout, MAX_VOLTAGE_V), 1e-3))
     experiments["prbs"] = (prbs_csv, None)
     for k, (label, (csv, predicted)) in enumerate(experiments.items()):
-        rec = record(plant_file, csv, folder / f"{label}.mcap", seed=100 + k)
+        rec = record(source, csv, folder / f"{label}.mcap", seed=100 + k)
         result = fit([folder / f"{label}.mcap"], folder / f"fit-{label}")
         row[label] = {
             "events": rec.get("events", []),
@@ -199,12 +229,15 @@ def verdicts(row: dict) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--seeds", type=int, nargs="*", default=[0, 1])
+    parser.add_argument(
+        "--matched", action="store_true", help="also the control: Table 4.2's hframe-8 as plant"
+    )
     parser.add_argument("--work", type=Path, default=Path("/tmp/design-check"))
     parser.add_argument("--json", type=Path, help="write the rows and verdicts here")
     args = parser.parse_args(argv)
     rows = []
-    for seed in args.seeds:
+    for seed in ([None] if args.matched else []) + list(args.seeds):
         start = time.perf_counter()
         row = check_plant(seed, args.work)
         row["wall_time_s"] = time.perf_counter() - start

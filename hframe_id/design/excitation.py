@@ -6,10 +6,10 @@ each a doublet on each motor, repeated ``cycles_i`` times over the block:
     u_i(t) = a d_i s(c_i t / T_block),   s = +1 for the first quarter of a cycle, -1 for its
     middle half, +1 for its last quarter,
 
-with d_1 = 1, d_2 = +/-1 (motors together or against each other at equal cycles), so that
-|u_i| <= a <= the voltage limit. A doublet's input integrates
-to zero over each half-cycle pair: a stage that follows its voltage like an integrator (the
-H-frame's speed follows the voltage within ~50 ms) comes back to where the doublet started,
+with c_i in ``CYCLES`` (0: the motor rests), d_1 = 1 and d_2 = +/-1 (the motors together or
+against each other), so that |u_i| <= a <= the voltage limit. A doublet's input integrates to
+zero over each cycle: a stage that follows its voltage like an integrator (the H-frame's speed
+follows the voltage within ~50 ms) comes back to where the doublet started,
 so that blocks can be chained without the motion drifting to the end stops, and the lasers
 (+/-5 cm) stay in range. Amplitude sets the speed (Coulomb against viscous friction), cycles
 the frequency (inertia at low, belt stiffness at high ones) and, through the two motors'

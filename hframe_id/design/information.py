@@ -33,6 +33,7 @@ from hframe_id.fitting.solver import GaussNewton
 from hframe_id.fitting.statistics import Block, compute_statistics
 from hframe_id.models import Model
 from hframe_id.parameters import ParameterSet
+from hframe_id.recordings.log_format import NOISE_STD_PREFIX
 from hframe_id.recordings.recording import Recording
 from hframe_id.recordings.sensors import LASER_OUTPUTS, SensorModel
 
@@ -244,15 +245,20 @@ def experiment_information(
     if len(names) != len(tables):
         raise FitError(f"{len(names)} names for {len(tables)} experiments")
 
-    def recordings(all_states):
+    def recordings(all_states, metadata):
         return [
-            predicted_recording(model, table, states, rig, sample_period_s, name, params.variant)
+            predicted_recording(
+                model, table, states, metadata, sample_period_s, name, params.variant
+            )
             for name, table, states in zip(names, tables, all_states, strict=True)
         ]
 
-    placeholder = build_problem(recordings([None] * len(tables)), params, options)
+    # The placeholder only simulates: its noise levels are declared (1 SI), so that a rig
+    # whose levels are estimated from the data does not estimate them from its zeros.
+    declared = {**rig, **{NOISE_STD_PREFIX + s.name: 1.0 for s in model.outputs}}
+    placeholder = build_problem(recordings([None] * len(tables), declared), params, options)
     all_states = simulate_experiments(placeholder)
-    problem = build_problem(recordings(all_states), params, options)
+    problem = build_problem(recordings(all_states, rig), params, options)
     return _information(problem, all_states)
 
 

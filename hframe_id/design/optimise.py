@@ -105,13 +105,6 @@ class Limits:
                     f"lie inside the travel with the {self.margin_m:g} m margin on each side"
                 )
 
-    def inside(self, reach: Mapping[str, tuple[float, float]]) -> bool:
-        """Whether extremes ``reach`` (axis -> (min, max) [m]) keep the margin."""
-        return all(
-            reach[a][0] >= low + self.margin_m and reach[a][1] <= high - self.margin_m
-            for a, (low, high) in self.travel_m.items()
-        )
-
     def overshoot(self, reach: Mapping[str, tuple[float, float]]) -> float:
         """How far [m] ``reach`` goes past the limits less the margin (<= 0: inside)."""
         return max(

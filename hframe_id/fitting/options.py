@@ -273,6 +273,21 @@ class FitOptions:
     start_seed: int = 0
 
     def __post_init__(self) -> None:
+        self._check_free_and_fix()
+        self._check_bounds()
+        self._check_channel_std()
+        self._check_shooting_interval()
+        self._check_smoothing()
+        self._check_solver_limits()
+        self._check_latency_samples()
+        self._check_consider()
+        self._check_method_names()
+        self._check_run_settings()
+        self._check_known_points()
+
+    def _check_free_and_fix(self) -> None:
+        """``free`` and ``fix``: sequences of non-empty names, stored as tuples; ``free``
+        None (the default set) or not empty."""
         for name in ("free", "fix"):
             value = getattr(self, name)
             if value is None and name == "free":
@@ -284,6 +299,10 @@ class FitOptions:
             object.__setattr__(self, name, tuple(value))
         if self.free is not None and not self.free:
             raise OptionError("free must name at least one parameter (or be None for defaults)")
+
+    def _check_bounds(self) -> None:
+        """``bounds``: a mapping of names to two numbers, low < high [SI]; ``bound_factor``
+        a number > 1."""
         if not isinstance(self.bounds, Mapping):
             raise OptionError(f"bounds must map names to (low, high), got {self.bounds!r}")
         for name, pair in self.bounds.items():
@@ -298,12 +317,18 @@ class FitOptions:
         _positive("bound_factor", self.bound_factor)
         if self.bound_factor <= 1:
             raise OptionError(f"bound_factor must be > 1, got {self.bound_factor!r}")
+
+    def _check_channel_std(self) -> None:
+        """``channel_std``: a mapping of output names to noise stds > 0 [rad or m]."""
         if not isinstance(self.channel_std, Mapping):
             raise OptionError(
                 f"channel_std must map output names to numbers, got {self.channel_std!r}"
             )
         for name, value in self.channel_std.items():
             _positive(f"channel_std[{name!r}]", value)
+
+    def _check_shooting_interval(self) -> None:
+        """``shooting_interval``: None (the model's default) or a whole number >= 1 [samples]."""
         if self.shooting_interval is not None and (
             isinstance(self.shooting_interval, bool)
             or not isinstance(self.shooting_interval, int)
@@ -312,6 +337,10 @@ class FitOptions:
             raise OptionError(
                 f"shooting interval must be >= 1 sample, got {self.shooting_interval!r}"
             )
+
+    def _check_smoothing(self) -> None:
+        """``smoothing``: None or two velocities > 0 [m/s, rad/s]; ``smoothing_schedule``:
+        factors > 0, not increasing, ending with 1. Both stored as tuples of floats."""
         if self.smoothing is not None:
             if len(self.smoothing) != 2:
                 raise OptionError(
@@ -332,6 +361,10 @@ class FitOptions:
                 f"smoothing_schedule must end with 1 (the final smoothing), got {schedule!r}"
             )
         object.__setattr__(self, "smoothing_schedule", tuple(float(v) for v in schedule))
+
+    def _check_solver_limits(self) -> None:
+        """Iteration and substep limits (whole numbers > 0), tolerances and thresholds
+        (> 0), ``max_misfit`` (None or > 0 [noise stds]), ``substep_safety`` >= 1."""
         _positive("max_iterations", self.max_iterations, integer=True)
         for name in (
             "step_tol",
@@ -345,6 +378,10 @@ class FitOptions:
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
         _positive("max_substeps", self.max_substeps, integer=True)
+
+    def _check_latency_samples(self) -> None:
+        """``latency_samples``: a mapping of output names to whole numbers in 0..100
+        [samples]."""
         if not isinstance(self.latency_samples, Mapping):
             raise OptionError(
                 f"latency_samples must map output names to samples, got {self.latency_samples!r}"
@@ -355,6 +392,10 @@ class FitOptions:
                     f"latency_samples[{name!r}] must be a whole number of samples in 0..100, "
                     f"got {value!r}"
                 )
+
+    def _check_consider(self) -> None:
+        """``consider``: None or a mapping of names to relative stds > 0 [1];
+        ``consider_method`` one of ``CONSIDER_METHODS``."""
         if self.consider is not None:
             if not isinstance(self.consider, Mapping):
                 raise OptionError(
@@ -367,6 +408,10 @@ class FitOptions:
                 f"consider_method must be one of {', '.join(CONSIDER_METHODS)}, "
                 f"got {self.consider_method!r}"
             )
+
+    def _check_method_names(self) -> None:
+        """The options chosen by name (solver, initial state, continuity, noise,
+        uncertainty) are known ones; ``confidence`` a float in (0, 1)."""
         if self.solver not in solver_names():
             raise OptionError(
                 f"solver must be one of {', '.join(solver_names())}, got {self.solver!r}"
@@ -391,6 +436,10 @@ class FitOptions:
             )
         if not (isinstance(self.confidence, float) and 0 < self.confidence < 1):
             raise OptionError(f"confidence must be in (0, 1), got {self.confidence!r}")
+
+    def _check_run_settings(self) -> None:
+        """``threads`` and ``starts`` whole numbers > 0, ``start_seed`` an integer >= 0,
+        ``verbose`` 0, 1 or 2, ``progress`` None or callable."""
         _positive("threads", self.threads, integer=True)
         _positive("starts", self.starts, integer=True)
         if (
@@ -403,6 +452,10 @@ class FitOptions:
             raise OptionError(f"verbose must be 0, 1 or 2, got {self.verbose!r}")
         if self.progress is not None and not callable(self.progress):
             raise OptionError("progress must be callable (FitProgress) -> None")
+
+    def _check_known_points(self) -> None:
+        """``known_points`` (``ParameterSet`` objects) and ``zero_reachable``, stored as
+        tuples."""
         from hframe_id.parameters import ParameterSet
 
         object.__setattr__(self, "known_points", tuple(self.known_points))

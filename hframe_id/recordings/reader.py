@@ -19,6 +19,7 @@ import struct
 import tempfile
 import warnings
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from io import BytesIO
@@ -37,7 +38,7 @@ from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import Channels
 from hframe_id.recordings.recording import Recording
-from hframe_id.recordings.samples import decode_rig_samples, decode_signal_samples
+from hframe_id.recordings.samples import SampleColumns, decode_rig_samples, decode_signal_samples
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -233,95 +234,26 @@ def read_recording(path: str | os.PathLike) -> Recording:
     """
     log = read_log(path)
     where = str(log.path)
-    channel = log.channel(fmt.SAMPLE_TOPIC)
-    if channel is None:
-        if not log.complete and not log.channels:
-            raise LogFormatError(
-                f"{where}: unfinished file with no complete chunk, nothing to recover "
-                f"({log.problem})"
-            )
-        topics = ", ".join(sorted(c.topic for c in log.channels.values())) or "none"
-        raise LogFormatError(
-            f"{where}: no {fmt.SAMPLE_TOPIC} channel, not an hframe-id recording "
-            f"(channels: {topics})"
-        )
-    schema = log.schemas.get(channel.schema_id)
-    if (
-        schema is None
-        or schema.name not in _SAMPLE_SCHEMAS
-        or schema.encoding != "jsonschema"
-        or channel.message_encoding != "json"
-    ):
-        found = f"{shown(schema.name)} ({schema.encoding})" if schema else "no schema"
-        expected = " or ".join(repr(name) for name in _SAMPLE_SCHEMAS)
-        raise LogFormatError(
-            f"{where}: {fmt.SAMPLE_TOPIC} has schema {found} with {shown(channel.message_encoding)}"
-            f" messages; expected {expected} (jsonschema) with 'json' messages"
-        )
-    experiment = _metadata(log, "experiment", fmt.EXPERIMENT_REQUIRED)
-    version = experiment["format_version"]
-    if fmt.major_version(version) != fmt.SUPPORTED_MAJOR:
-        raise LogFormatError(
-            f"{where}: unknown log format version {shown(version)}; this hframe-id reads "
-            f"{fmt.SUPPORTED_MAJOR}.x"
-        )
-    rig = _metadata(log, "rig", _SAMPLE_SCHEMAS[schema.name])
-    variant = str(rig["variant"])
-    if not fmt.VARIANT_PATTERN.match(variant):
-        raise LogFormatError(
-            f"{where}: rig.variant {shown(variant)} is not a model variant name (letters, digits, "
-            "'-', '_')"
-        )
-    sample_period_s = rig["sample_period_s"]
-    if not isinstance(sample_period_s, int | float) or not sample_period_s > 0:
-        raise LogFormatError(
-            f"{where}: rig.sample_period_s must be > 0, got {shown(sample_period_s)}"
-        )
-    if schema.name == fmt.SAMPLE_SCHEMA_NAME:
-        decode = partial(decode_rig_samples, rig=rig)
-    else:
-        try:
-            channels = Channels.from_rig(rig)
-        except ValueError as err:
-            raise LogFormatError(f"{where}: rig metadata: {err}") from None
-        decode = partial(decode_signal_samples, channels=channels)
+    schema_name = _sample_schema_name(log, where)
+    experiment = _experiment_metadata(log, where)
+    rig, variant, sample_period_s = _rig_metadata(log, where, schema_name)
+    decode = _sample_decoder(where, rig, schema_name)
     messages = log.decoded(fmt.SAMPLE_TOPIC)
     if not messages:
         raise LogFormatError(f"{where}: no samples on {fmt.SAMPLE_TOPIC}")
     samples = decode(where, messages)
     _check_noise_std(where, rig, samples.output_names)
-    sequence = samples.sequence
-    steps = np.diff(sequence)
-    gap_at = np.flatnonzero(steps > 1)
-    gaps = tuple((int(i + 1), int(steps[i] - 1)) for i in gap_at)
+    gaps = _sequence_gaps(samples.sequence)
 
     events = tuple(log.decoded(fmt.EVENT_TOPIC))
     aborted = any(e.get("kind") == "abort" for e in events)
-    step_s = clock_mismatch(float(sample_period_s), samples.device_time_us, sequence)
-    if step_s is not None:
-        raise LogFormatError(
-            f"{where}: rig.sample_period_s {sample_period_s:g} s does not match the device "
-            f"clock, whose samples are {step_s * 1e3:g} ms apart (device_time_us)"
-        )
+    _check_clock(where, sample_period_s, samples)
     time_s = (samples.device_time_us - samples.device_time_us[0]) * 1e-6
     truth = _truth(log)
     if not log.complete:
-        recovered = f"{len(messages)} samples ({time_s[-1]:.3f} s)" if len(time_s) else "nothing"
-        warnings.warn(
-            f"{where}: file is unfinished (writer killed?): {log.problem}; recovered "
-            f"{recovered} from {log.chunks} complete chunk(s), {log.bytes_read} of "
-            f"{log.bytes_total} bytes",
-            TruncatedRecordingWarning,
-            stacklevel=2,
-        )
+        _warn_truncated(log, where, len(messages), time_s)
     if gaps:
-        lost = sum(n for _, n in gaps)
-        warnings.warn(
-            f"{where}: {lost} sample(s) lost in {len(gaps)} gap(s) of the sequence numbers "
-            f"(first before sample {gaps[0][0]}, sequence {sequence[gaps[0][0]]})",
-            SequenceGapWarning,
-            stacklevel=2,
-        )
+        _warn_gaps(where, gaps, samples.sequence)
     return Recording(
         variant=variant,
         sample_period_s=float(sample_period_s),
@@ -348,6 +280,125 @@ def read_recording(path: str | os.PathLike) -> Recording:
         path=log.path,
         truncated=not log.complete,
         events=events,
+    )
+
+
+def _sample_schema_name(log: LogContents, where: str) -> str:
+    """The name of the sample channel's schema, one of ``_SAMPLE_SCHEMAS`` (jsonschema, with
+    JSON messages); a file without that channel or schema is not an hframe-id recording."""
+    channel = log.channel(fmt.SAMPLE_TOPIC)
+    if channel is None:
+        if not log.complete and not log.channels:
+            raise LogFormatError(
+                f"{where}: unfinished file with no complete chunk, nothing to recover "
+                f"({log.problem})"
+            )
+        topics = ", ".join(sorted(c.topic for c in log.channels.values())) or "none"
+        raise LogFormatError(
+            f"{where}: no {fmt.SAMPLE_TOPIC} channel, not an hframe-id recording "
+            f"(channels: {topics})"
+        )
+    schema = log.schemas.get(channel.schema_id)
+    if (
+        schema is None
+        or schema.name not in _SAMPLE_SCHEMAS
+        or schema.encoding != "jsonschema"
+        or channel.message_encoding != "json"
+    ):
+        found = f"{shown(schema.name)} ({schema.encoding})" if schema else "no schema"
+        expected = " or ".join(repr(name) for name in _SAMPLE_SCHEMAS)
+        raise LogFormatError(
+            f"{where}: {fmt.SAMPLE_TOPIC} has schema {found} with {shown(channel.message_encoding)}"
+            f" messages; expected {expected} (jsonschema) with 'json' messages"
+        )
+    return schema.name
+
+
+def _experiment_metadata(log: LogContents, where: str) -> dict[str, Any]:
+    """The ``experiment`` metadata record, of a log format version this reader reads."""
+    experiment = _metadata(log, "experiment", fmt.EXPERIMENT_REQUIRED)
+    version = experiment["format_version"]
+    if fmt.major_version(version) != fmt.SUPPORTED_MAJOR:
+        raise LogFormatError(
+            f"{where}: unknown log format version {shown(version)}; this hframe-id reads "
+            f"{fmt.SUPPORTED_MAJOR}.x"
+        )
+    return experiment
+
+
+def _rig_metadata(
+    log: LogContents, where: str, schema_name: str
+) -> tuple[dict[str, Any], str, int | float]:
+    """The ``rig`` metadata record with the keys ``schema_name`` requires, its model variant
+    (an identifier) and its sample period [s] (> 0)."""
+    rig = _metadata(log, "rig", _SAMPLE_SCHEMAS[schema_name])
+    variant = str(rig["variant"])
+    if not fmt.VARIANT_PATTERN.match(variant):
+        raise LogFormatError(
+            f"{where}: rig.variant {shown(variant)} is not a model variant name (letters, digits, "
+            "'-', '_')"
+        )
+    sample_period_s = rig["sample_period_s"]
+    if not isinstance(sample_period_s, int | float) or not sample_period_s > 0:
+        raise LogFormatError(
+            f"{where}: rig.sample_period_s must be > 0, got {shown(sample_period_s)}"
+        )
+    return rig, variant, sample_period_s
+
+
+def _sample_decoder(
+    where: str, rig: dict[str, Any], schema_name: str
+) -> Callable[[str, list[dict[str, Any]]], SampleColumns]:
+    """The decoder of ``schema_name``'s sample messages, given the rig metadata (the signal
+    schema's channels are declared there)."""
+    if schema_name == fmt.SAMPLE_SCHEMA_NAME:
+        return partial(decode_rig_samples, rig=rig)
+    try:
+        channels = Channels.from_rig(rig)
+    except ValueError as err:
+        raise LogFormatError(f"{where}: rig metadata: {err}") from None
+    return partial(decode_signal_samples, channels=channels)
+
+
+def _sequence_gaps(sequence: np.ndarray) -> tuple[tuple[int, int], ...]:
+    """(index of the first sample after the gap, samples lost) per gap in ``sequence``."""
+    steps = np.diff(sequence)
+    gap_at = np.flatnonzero(steps > 1)
+    return tuple((int(i + 1), int(steps[i] - 1)) for i in gap_at)
+
+
+def _check_clock(where: str, sample_period_s: int | float, samples: SampleColumns) -> None:
+    """The device clock agrees with rig.sample_period_s [s] (``clock_mismatch``)."""
+    step_s = clock_mismatch(float(sample_period_s), samples.device_time_us, samples.sequence)
+    if step_s is not None:
+        raise LogFormatError(
+            f"{where}: rig.sample_period_s {sample_period_s:g} s does not match the device "
+            f"clock, whose samples are {step_s * 1e3:g} ms apart (device_time_us)"
+        )
+
+
+def _warn_truncated(log: LogContents, where: str, n_samples: int, time_s: np.ndarray) -> None:
+    """Warn that the file is unfinished, with how much was recovered (``time_s`` [s]); the
+    warning points at ``read_recording``'s caller."""
+    recovered = f"{n_samples} samples ({time_s[-1]:.3f} s)" if len(time_s) else "nothing"
+    warnings.warn(
+        f"{where}: file is unfinished (writer killed?): {log.problem}; recovered "
+        f"{recovered} from {log.chunks} complete chunk(s), {log.bytes_read} of "
+        f"{log.bytes_total} bytes",
+        TruncatedRecordingWarning,
+        stacklevel=3,
+    )
+
+
+def _warn_gaps(where: str, gaps: tuple[tuple[int, int], ...], sequence: np.ndarray) -> None:
+    """Warn of samples lost on the link (``_sequence_gaps``); the warning points at
+    ``read_recording``'s caller."""
+    lost = sum(n for _, n in gaps)
+    warnings.warn(
+        f"{where}: {lost} sample(s) lost in {len(gaps)} gap(s) of the sequence numbers "
+        f"(first before sample {gaps[0][0]}, sequence {sequence[gaps[0][0]]})",
+        SequenceGapWarning,
+        stacklevel=3,
     )
 
 

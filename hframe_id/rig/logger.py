@@ -33,7 +33,7 @@ from hframe_id.recordings.writer import (
     Attachment,
     LogWriter,
 )
-from hframe_id.rig.interface import Rig, RigSample
+from hframe_id.rig.interface import Rig, RigInfo, RigSample
 
 #: Sample time between two ``/rig/status`` messages [s].
 STATUS_INTERVAL_S = 0.1
@@ -215,24 +215,51 @@ def run_experiment(
     The rig is left stopped with 0 V whatever happens; the recording is finished (renamed to
     its final name) whatever happens, with an ``abort`` event if the run did not complete.
     """
-    info = rig.info
+    table = _voltage_table(rig.info, protocol)
+    writer = _open_writer(rig, protocol, options, attachments)
+    stop = _StopRequest()
+    if options.handle_signals:
+        stop.install()
+    run = _Run(rig, options, writer, table, stop)
+    try:
+        rig.start()
+        run.event("start", f"{protocol.name} protocol, {run.n_planned} samples planned")
+        while run.step():
+            pass
+    except BaseException as err:
+        run.fail(err)
+        raise
+    finally:
+        run.close()
+    return run.summary
+
+
+def _voltage_table(info: RigInfo, protocol: ExperimentProtocol) -> np.ndarray:
+    """The protocol's (N, n_u) voltages [V] at the rig's sample period, once the protocol is
+    checked to drive as many motors as the rig has."""
     if protocol.n_inputs != len(info.inputs):
         raise OptionError(
             f"protocol {protocol.name} drives {protocol.n_inputs} motor(s); the "
             f"{info.variant} rig has {len(info.inputs)} ({', '.join(info.inputs)})"
         )
-    period_us = info.period_us
-    table = protocol.table(info.sample_period_s)
-    n_planned = table.shape[0]
-    sensors = info.sensors
-    clamped_table = np.clip(table, sensors.dac_min_v, sensors.dac_max_v)
+    return protocol.table(info.sample_period_s)
+
+
+def _open_writer(
+    rig: Rig,
+    protocol: ExperimentProtocol,
+    options: RunOptions,
+    attachments: Sequence[Attachment],
+) -> LogWriter:
+    """The recording's writer, its metadata and attachments written, sample 0 at
+    ``options.start_time`` (default: now; it must carry a time zone)."""
     start = options.start_time or dt.datetime.now(dt.UTC)
     if start.tzinfo is None:
         raise OptionError("start_time must carry a time zone")
     start_ns = int(start.timestamp()) * 10**9 + start.microsecond * 1000
-    writer = LogWriter(
+    return LogWriter(
         options.out,
-        info.metadata(),
+        rig.info.metadata(),
         experiment_metadata(protocol, options, start),
         [*rig.attachments(), *attachments],
         start_time_ns=start_ns,
@@ -240,150 +267,204 @@ def run_experiment(
         flush_interval_s=None if options.reproducible else options.flush_interval_s,
         overwrite=options.overwrite,
     )
-    summary = RunSummary(path=writer.path, planned_samples=n_planned)
-    stop = _StopRequest()
-    if options.handle_signals:
-        stop.install()
-    zero = np.zeros(len(info.inputs))
-    periods, latencies, overhead = _Running(), _Running(), _Running()
-    first_time: int | None = None
-    last_sequence: int | None = None
-    last_commanded: int | None = None
-    last_received: float | None = None
-    next_status_us = 0
-    time_us = 0
-    clamp_reported = False
-    wall_start = time.perf_counter()
-    next_progress = wall_start
-    encoder_step = sensors.encoder_step_rad
 
-    def event(kind: str, reason: str, sample: RigSample | None = None) -> None:
-        summary.events.append((kind, reason))
-        writer.event(
-            time_us,
+
+class _Run:
+    """One run from ``rig.start()`` to the finished recording: the sample loop's state (the
+    device clock, the last sequence numbers, the host timing statistics) and the summary.
+
+    ``time_us`` is the device time since the first sample [us]; every event and status
+    message is stamped with it.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        options: RunOptions,
+        writer: LogWriter,
+        table: np.ndarray,
+        stop: _StopRequest,
+    ) -> None:
+        info = rig.info
+        self.rig, self.info, self.options, self.writer, self.stop = rig, info, options, writer, stop
+        self.period_us = info.period_us
+        self.table = table
+        self.n_planned = table.shape[0]
+        self.sensors = info.sensors
+        self.clamped_table = np.clip(table, self.sensors.dac_min_v, self.sensors.dac_max_v)
+        self.summary = RunSummary(path=writer.path, planned_samples=self.n_planned)
+        self.zero = np.zeros(len(info.inputs))
+        self.periods, self.latencies, self.overhead = _Running(), _Running(), _Running()
+        self.first_time: int | None = None
+        self.last_sequence: int | None = None
+        self.last_commanded: int | None = None
+        self.last_received: float | None = None
+        self.next_status_us = 0
+        self.time_us = 0
+        self.clamp_reported = False
+        self.wall_start = time.perf_counter()
+        self.next_progress = self.wall_start
+        self.encoder_step = self.sensors.encoder_step_rad
+        self.sample: RigSample | None = None
+
+    def event(self, kind: str, reason: str, sample: RigSample | None = None) -> None:
+        """Log an event at the current device time and keep it for the summary."""
+        self.summary.events.append((kind, reason))
+        self.writer.event(
+            self.time_us,
             kind,
             reason,
             sample.sequence if sample else None,
             sample.device_time_us if sample else None,
         )
 
-    def status(sample: RigSample | None) -> None:
-        mean_p, std_p, max_p = periods.values(1e6)
-        mean_l, _, max_l = latencies.values(1e6)
-        timing = not options.reproducible
-        writer.status(
-            time_us,
+    def status(self, sample: RigSample | None) -> None:
+        """Log a ``/rig/status`` message: counters so far and host timing [us] (left out of
+        reproducible runs)."""
+        mean_p, std_p, max_p = self.periods.values(1e6)
+        mean_l, _, max_l = self.latencies.values(1e6)
+        timing = not self.options.reproducible
+        self.writer.status(
+            self.time_us,
             {
-                "sequence": sample.sequence if sample else (last_sequence or 0),
-                "samples": summary.samples,
-                "lost_samples": summary.lost_samples,
-                "crc_errors": rig.stats.crc_errors,
-                "late_commands": summary.late_commands,
+                "sequence": sample.sequence if sample else (self.last_sequence or 0),
+                "samples": self.summary.samples,
+                "lost_samples": self.summary.lost_samples,
+                "crc_errors": self.rig.stats.crc_errors,
+                "late_commands": self.summary.late_commands,
                 "watchdog": bool(sample.watchdog) if sample else False,
                 "host_latency_mean_us": mean_l if timing else None,
                 "host_latency_max_us": max_l if timing else None,
                 "host_period_jitter_us": std_p if timing else None,
                 "host_period_max_us": max_p if timing else None,
-                "queue_depth": writer.queue_depth() if timing else None,
+                "queue_depth": self.writer.queue_depth() if timing else None,
             },
         )
 
-    sample: RigSample | None = None
-    try:
-        rig.start()
-        event("start", f"{protocol.name} protocol, {n_planned} samples planned")
-        while True:
-            try:
-                sample = rig.read()
-            except RigFault as fault:
-                _safe_zero(rig, last_sequence, zero)
-                summary.aborted, summary.abort_reason = True, f"link fault: {fault}"
-                event("link_fault", str(fault))
-                event("abort", summary.abort_reason)
-                break
-            busy_from = time.perf_counter()
-            if first_time is None:
-                first_time = sample.device_time_us
-            time_us = sample.device_time_us - first_time
-            k = round(time_us / period_us)
-            if last_sequence is not None:
-                missing = sample.sequence - last_sequence - 1
-                if missing > 0:
-                    summary.lost_samples += missing
-                    summary.gaps += 1
-            if last_commanded is not None and sample.command_sequence != last_commanded:
-                summary.late_commands += 1
-            reason, kind = None, ""
-            if stop.reason is not None:
-                reason, kind = stop.reason, "signal"
-            closed = [name for name, on in sample.limits.items() if on]
-            if closed:
-                reason, kind = f"limit switch {', '.join(closed)} closed", "limit"
-            if k >= n_planned:  # the last planned samples were lost: the run is over
-                rig.set_voltages(sample.sequence, zero)
-                break
-            if reason is not None:
-                volts = zero
-            else:
-                volts = clamped_table[k]
-                if not clamp_reported and (volts != table[k]).any():
-                    clamp_reported = True
-                    event(
-                        "clamp",
-                        f"requested {table[k].tolist()} V clamped to the DAC range "
-                        f"[{sensors.dac_min_v}, {sensors.dac_max_v}] V",
-                        sample,
-                    )
-            rig.set_voltages(sample.sequence, volts)
-            commanded_at = time.perf_counter()
-            latencies.add(commanded_at - sample.received_s)
-            if last_received is not None:
-                periods.add(sample.received_s - last_received)
-            last_received = sample.received_s
-            last_sequence, last_commanded = sample.sequence, sample.sequence
-            writer.sample(time_us, _message(info, sample, volts, encoder_step))
-            summary.samples += 1
-            if reason is not None:
-                summary.aborted, summary.abort_reason = True, reason
-                event(kind, reason, sample)
-                event("abort", reason, sample)
-                break
-            if time_us >= next_status_us:
-                status(sample)
-                next_status_us += round(STATUS_INTERVAL_S * 1e6)
-            overhead.add(time.perf_counter() - busy_from)
-            if options.progress is not None and commanded_at >= next_progress:
-                options.progress(k + 1, n_planned, summary.lost_samples)
-                next_progress = commanded_at + 0.1
-            if k >= n_planned - 1:
-                break
-    except BaseException as err:
-        _safe_zero(rig, last_sequence, zero)
-        summary.aborted = True
-        summary.abort_reason = f"{type(err).__name__}: {err}"
-        event("abort", summary.abort_reason, sample)
-        raise
-    finally:
+    def step(self) -> bool:
+        """Read one sample, command its voltage (0 V once a stop is due) and log both;
+        False when the run is over (completed, stopped, or the link lost)."""
         try:
-            rig.stop()
+            sample = self.rig.read()
         except RigFault as fault:
-            event("note", f"stopping the rig failed: {fault}")
-        stop.restore()
+            self._link_fault(fault)
+            return False
+        self.sample = sample
+        busy_from = time.perf_counter()
+        k = self._sample_index(sample)
+        self._count_losses(sample)
+        reason, kind = self._stop_reason(sample)
+        if k >= self.n_planned:  # the last planned samples were lost: the run is over
+            self.rig.set_voltages(sample.sequence, self.zero)
+            return False
+        volts = self.zero if reason is not None else self._planned_volts(k, sample)
+        self.rig.set_voltages(sample.sequence, volts)
+        commanded_at = time.perf_counter()
+        self._record(sample, volts, commanded_at)
+        if reason is not None:
+            self.summary.aborted, self.summary.abort_reason = True, reason
+            self.event(kind, reason, sample)
+            self.event("abort", reason, sample)
+            return False
+        if self.time_us >= self.next_status_us:
+            self.status(sample)
+            self.next_status_us += round(STATUS_INTERVAL_S * 1e6)
+        self.overhead.add(time.perf_counter() - busy_from)
+        if self.options.progress is not None and commanded_at >= self.next_progress:
+            self.options.progress(k + 1, self.n_planned, self.summary.lost_samples)
+            self.next_progress = commanded_at + 0.1
+        return k < self.n_planned - 1
+
+    def _sample_index(self, sample: RigSample) -> int:
+        """Advance ``time_us`` to the sample's device time; the protocol row it is due at."""
+        if self.first_time is None:
+            self.first_time = sample.device_time_us
+        self.time_us = sample.device_time_us - self.first_time
+        return round(self.time_us / self.period_us)
+
+    def _count_losses(self, sample: RigSample) -> None:
+        """Count the samples lost before this one and a command the device did not apply in
+        time."""
+        if self.last_sequence is not None:
+            missing = sample.sequence - self.last_sequence - 1
+            if missing > 0:
+                self.summary.lost_samples += missing
+                self.summary.gaps += 1
+        if self.last_commanded is not None and sample.command_sequence != self.last_commanded:
+            self.summary.late_commands += 1
+
+    def _stop_reason(self, sample: RigSample) -> tuple[str | None, str]:
+        """(reason, event kind) of a stop due now: a closed limit switch, else a signal;
+        (None, "") to go on."""
+        reason, kind = None, ""
+        if self.stop.reason is not None:
+            reason, kind = self.stop.reason, "signal"
+        closed = [name for name, on in sample.limits.items() if on]
+        if closed:
+            reason, kind = f"limit switch {', '.join(closed)} closed", "limit"
+        return reason, kind
+
+    def _planned_volts(self, k: int, sample: RigSample) -> np.ndarray:
+        """Row ``k`` of the protocol clamped to the DAC range [V]; the first clamp is logged."""
+        volts = self.clamped_table[k]
+        if not self.clamp_reported and (volts != self.table[k]).any():
+            self.clamp_reported = True
+            self.event(
+                "clamp",
+                f"requested {self.table[k].tolist()} V clamped to the DAC range "
+                f"[{self.sensors.dac_min_v}, {self.sensors.dac_max_v}] V",
+                sample,
+            )
+        return volts
+
+    def _record(self, sample: RigSample, volts: np.ndarray, commanded_at: float) -> None:
+        """Take the sample's host latency and period [s] into the statistics and queue its
+        message with the voltages commanded [V]."""
+        self.latencies.add(commanded_at - sample.received_s)
+        if self.last_received is not None:
+            self.periods.add(sample.received_s - self.last_received)
+        self.last_received = sample.received_s
+        self.last_sequence, self.last_commanded = sample.sequence, sample.sequence
+        self.writer.sample(self.time_us, _message(self.info, sample, volts, self.encoder_step))
+        self.summary.samples += 1
+
+    def _link_fault(self, fault: RigFault) -> None:
+        """Set 0 V (if the link still takes it) and log the fault as the run's abort."""
+        _safe_zero(self.rig, self.last_sequence, self.zero)
+        self.summary.aborted, self.summary.abort_reason = True, f"link fault: {fault}"
+        self.event("link_fault", str(fault))
+        self.event("abort", self.summary.abort_reason)
+
+    def fail(self, err: BaseException) -> None:
+        """Set 0 V (if the link still takes it) and log ``err`` as the run's abort."""
+        _safe_zero(self.rig, self.last_sequence, self.zero)
+        self.summary.aborted = True
+        self.summary.abort_reason = f"{type(err).__name__}: {err}"
+        self.event("abort", self.summary.abort_reason, self.sample)
+
+    def close(self) -> None:
+        """Stop the rig, put back the signal handlers, log the stop and a last status, fill
+        in the summary's timing [s, us] and finish the recording."""
+        summary = self.summary
+        try:
+            self.rig.stop()
+        except RigFault as fault:
+            self.event("note", f"stopping the rig failed: {fault}")
+        self.stop.restore()
         if not summary.aborted:
-            event("stop", f"completed {summary.samples} samples", sample)
-        status(sample)
-        summary.wall_s = time.perf_counter() - wall_start
-        summary.duration_s = time_us * 1e-6
-        summary.crc_errors = rig.stats.crc_errors
+            self.event("stop", f"completed {summary.samples} samples", self.sample)
+        self.status(self.sample)
+        summary.wall_s = time.perf_counter() - self.wall_start
+        summary.duration_s = self.time_us * 1e-6
+        summary.crc_errors = self.rig.stats.crc_errors
         (summary.host_period_mean_us, summary.host_period_jitter_us, summary.host_period_max_us) = (
-            periods.values(1e6)
+            self.periods.values(1e6)
         )
-        summary.host_latency_mean_us, _, summary.host_latency_max_us = latencies.values(1e6)
-        summary.overhead_mean_us = overhead.values(1e6)[0]
-        writer.finish()
-        if options.progress is not None:
-            options.progress(summary.samples, n_planned, summary.lost_samples)
-    return summary
+        summary.host_latency_mean_us, _, summary.host_latency_max_us = self.latencies.values(1e6)
+        summary.overhead_mean_us = self.overhead.values(1e6)[0]
+        self.writer.finish()
+        if self.options.progress is not None:
+            self.options.progress(summary.samples, self.n_planned, summary.lost_samples)
 
 
 def _safe_zero(rig: Rig, sequence: int | None, zero: np.ndarray) -> None:

@@ -118,3 +118,16 @@ def test_misfit_factor_is_the_fits_errors_over_the_predicted_ones(table, inputs,
     assert misfit_factor(reporting(0.5), [inputs], options, sensors, 1e-3) == 1.0
     with pytest.raises(OptionError, match="--calibrate"):
         misfit_factor(table, [inputs], options, sensors, 1e-3)
+
+
+def test_a_rig_that_estimates_its_noise_from_the_data_is_predicted(table, inputs):
+    """An imported rig may declare ``noise_std_<output>: estimate``: the prediction then
+    estimates the levels from the noise-free simulated outputs, as the fit would from data,
+    and the placeholder that simulates them (all zeros) is not asked to."""
+    rig = {
+        "backend": "imported",
+        **SensorModel().as_metadata(),
+        **{f"noise_std_{n}": "estimate" for n in ("phi1", "phi2", "x", "y")},
+    }
+    info = experiment_information(table, [inputs], design_options(("k_l", "M_cart")), rig=rig)
+    assert np.all(np.isfinite(info.relative_std()))

@@ -192,7 +192,7 @@ def test_estimated_noise_that_ends_at_the_sensor_level_states_no_mismatch(mismat
 def test_a_reference_of_zero_gets_an_absolute_difference(mismatched):
     """Table 4.1's Coulomb friction is 0: against it (as reference or truth) the table shows
     the absolute difference, not a division by zero (a linear plant's report crashed)."""
-    from hframe_id.fitting.report import parameter_table
+    from hframe_id.fitting.report_tables import parameter_table
 
     result, _ = mismatched
     table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")

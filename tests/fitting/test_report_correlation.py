@@ -5,8 +5,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hframe_id.fitting.report import correlated_groups, correlation_lines
 from hframe_id.fitting.report_figures import plot_correlation
+from hframe_id.fitting.report_tables import correlated_groups, correlation_lines
 
 
 def _result(correlation, identified_by=None):

@@ -196,7 +196,7 @@ def test_leave_one_out_on_small_simulated_recordings():
 def test_the_report_says_when_parameters_move_more_than_their_intervals():
     from types import SimpleNamespace
 
-    from hframe_id.fitting.report import _jackknife_sentence
+    from hframe_id.fitting.report_tables import jackknife_sentence
     from hframe_id.validation.cross_validation import LeaveOneOutTable, Spread
 
     def spread(name, jackknife):
@@ -204,10 +204,10 @@ def test_the_report_says_when_parameters_move_more_than_their_intervals():
 
     table = LeaveOneOutTable(("x",), (), (spread("F_c", 0.5), spread("M", 0.01)))
     result = SimpleNamespace(estimates={n: SimpleNamespace(std_error=0.1) for n in ("F_c", "M")})
-    sentence = " ".join(_jackknife_sentence(result, table))
+    sentence = " ".join(jackknife_sentence(result, table))
     assert "F_c (5x)" in sentence and "M (" not in sentence
     table = LeaveOneOutTable(("x",), (), (spread("M", 0.01),))
-    assert _jackknife_sentence(result, table) == []
+    assert jackknife_sentence(result, table) == []
 
 
 def test_allowed_outside_is_the_binomial_quantile():
