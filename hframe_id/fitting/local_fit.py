@@ -318,7 +318,7 @@ def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting
     x = ca.SX.sym("x", model.n_states)
     p = ca.SX.sym("p", len(model.parameters))
     _, potential = model.energy(x, p)
-    unmeasured = np.flatnonzero(~np.any(ms.c[:, : ms.nq] != 0, axis=0))
+    unmeasured = np.flatnonzero(~_measured_coordinates(ms))
     force = ca.gradient(potential, x)[unmeasured.tolist()]
     coupled = {j for j in range(p.shape[0]) if ca.depends_on(force, p[j])}
     return [f for f, i in enumerate(problem.free) if i in coupled]
@@ -602,7 +602,15 @@ def _solve(
     return state, gn
 
 
+def _measured_coordinates(ms: MultipleShooting) -> np.ndarray:
+    """(n_q,) True for the coordinates an output measures, by their position or their rate
+    (a tachometer)."""
+    seen = np.any(ms.c[:, : ms.nq] != 0, axis=0)
+    states = ms.output_states[ms.output_states >= 0]
+    seen[states % ms.nq] = True
+    return seen
+
+
 def _unmeasured_coordinates(ms: MultipleShooting) -> bool:
     """Whether some coordinate is measured by no output (one-axis: the idler pulley)."""
-    seen = np.any(ms.c[:, : ms.nq] != 0, axis=0)
-    return not bool(np.all(seen))
+    return not bool(np.all(_measured_coordinates(ms)))

@@ -132,9 +132,9 @@ class FitOptions:
         default bound (not zero, not a given bound) is repeated with f squared, at most
         ``fit.BOX_WIDENINGS`` times: the default box is a guard for the exponential, not a
         statement about the rig, so it must not decide the answer.
-    channel_std : ``{output name: std}`` [SI: rad or m], the noise each residual is divided
-        by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser noise
-        std for positions (both from the recording's rig metadata).
+    channel_std : ``{output name: std}`` [SI: the output's unit], the noise each residual is
+        divided by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser
+        noise std for positions (both from the recording's rig metadata).
     latency_samples : ``{output name: samples}``, whole samples a sensor lags the plant
         (the laser's read-out latency, from its data sheet): the channel's sample k + d is
         compared with the model at sample k. Latency is not estimated: in steady motion a
