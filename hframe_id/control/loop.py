@@ -40,8 +40,9 @@ DIVERGENCE_FACTOR = 1e3
 
 def check_fits(controller: ControllerDeclaration, model: Model, recording: Recording) -> None:
     """Raise ``ControllerError`` (one line naming the controller and the item) unless the
-    controller drives every input of ``model``, reads outputs it has, and reads signals
-    ``recording`` holds, with a value at every sample."""
+    controller drives every input of ``model``, reads outputs it has (functions of the state
+    alone: ``Model.output``), and reads signals ``recording`` holds, with a value at every
+    sample."""
     where = controller.where
     inputs = [s.name for s in model.inputs]
     if sorted(controller.command_names) != sorted(inputs):
@@ -50,6 +51,12 @@ def check_fits(controller: ControllerDeclaration, model: Model, recording: Recor
             f"takes inputs {inputs}"
         )
     outputs = [s.name for s in model.outputs]
+    if model.output is None:
+        raise ControllerError(
+            f"{where}: model {model.variant} has an output that depends on its inputs or "
+            f"parameters (outputs: {', '.join(outputs)}); a closed loop reads outputs that are "
+            "functions of the state alone"
+        )
     for name in controller.measured:
         if name not in outputs:
             raise ControllerError(

@@ -26,10 +26,11 @@ import numpy as np
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import Criterion, known_points, reference_sets
-from hframe_id.fitting.local_fit import fit_in_box, labelled, progress_sink
+from hframe_id.fitting.local_fit import fit_in_box
 from hframe_id.fitting.multistart import judged, seeded_starts
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
 from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.parameters import ParameterSet

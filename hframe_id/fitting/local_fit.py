@@ -23,7 +23,6 @@ does not converge, again from the measured nodes.
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import replace
 
@@ -36,9 +35,9 @@ from hframe_id.fitting.held_uncertainty import include_held_uncertainty
 from hframe_id.fitting.noise_rounds import MISMATCH_RMS, estimate_noise, noise_report
 from hframe_id.fitting.options import (
     FitOptions,
-    FitProgress,
 )
 from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
@@ -46,6 +45,7 @@ from hframe_id.fitting.solvers import solver_named
 from hframe_id.fitting.stages import (
     INTERMEDIATE_DEFECT_TOL,
     INTERMEDIATE_STEP_TOL,
+    equation_error_report,
     estimate_states,
     exact_stage,
     penalty_stage,
@@ -86,38 +86,6 @@ RESTART_MIN_GAIN = 2.0
 
 
 DEFERRED_STAGE = "all windows: deferred to the noise rounds"
-
-
-def _equation_error_report(seconds: float, used: bool) -> StageReport:
-    return StageReport(
-        name="equation error",
-        smoothing=(math.nan, math.nan),
-        iterations=0,
-        converged=True,
-        message="regression on differentiated data: "
-        + ("used as the start" if used else "worse than the given start, not used"),
-        cost=math.nan,
-        max_defect=math.nan,
-        wall_time_s=seconds,
-    )
-
-
-def progress_sink(options: FitOptions):
-    if options.progress is not None:
-        return options.progress
-    if options.verbose:
-
-        def printer(p: FitProgress) -> None:
-            print(
-                f"  {p.stage:<30} it {p.iteration:3d}  cost {p.cost:12.6g}  "
-                f"step {p.step:8.1e}  defect {p.defect:8.1e}"
-                + (f"  {p.message}" if options.verbose > 1 else ""),
-                file=sys.stderr,
-                flush=True,
-            )
-
-        return printer
-    return None
 
 
 def _scaled(smoothing: tuple[float, float], factor: float) -> tuple[float, float]:
@@ -304,13 +272,6 @@ def _restarts_along_unmeasured_springs(
     return state, gn, stats, held
 
 
-def labelled(progress, label: str):
-    """A progress sink that prefixes the stage name with ``label`` (None stays None)."""
-    if progress is None:
-        return None
-    return lambda p: progress(replace(p, stage=f"{label}: {p.stage}"))
-
-
 def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting) -> list[int]:
     """Free parameters (indices into ``problem.free``) that enter the generalised force on
     a coordinate no output measures through the potential energy (one-axis: k2, k3)."""
@@ -358,7 +319,7 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, r
         used = bool(np.isfinite(costs[1]) and costs[1] < costs[0])
         if used:
             theta = regressed
-        stages.append(_equation_error_report(seconds + time.perf_counter() - start, used))
+        stages.append(equation_error_report(seconds + time.perf_counter() - start, used))
     active = np.ones(n_free, dtype=bool)
     state, gn = _solve(
         problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass, True

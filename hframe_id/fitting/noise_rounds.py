@@ -13,13 +13,13 @@ majorises (1) up to a constant: a step that lowers it lowers L (majorise-minimis
 levels are floored at the sensors' std (a channel fitted below its sensor's noise is
 overfitted, not better known).
 
-Round 1 is solved at the levels of its start; from round 2 on the Gauss-Newton solve
-re-weights the channels at its accepted iterates whenever a level has moved by more than
-``NOISE_RTOL`` (in log) since it was last set (``ChannelLevels``). A round ends when its solve
-converges; the rounds stop once no level at a round's end differs from the weights that round
-converged under by more than ``NOISE_RTOL``. Re-weighting within the solve, rather than once
-per converged round, saves the rounds' cost of converging to points that the next weights
-move (five rounds of 16-49 iterations on the worn plant of issue 25).
+Each round is a full solve at fixed levels, warm-started from the last; the rounds stop once
+no level at a round's end differs from the levels it was solved at by more than
+``NOISE_RTOL``. (Re-setting the levels within a round's solve, whenever one moved by 5 %, took
+the worn plant of issue 25 to the same optimum in 2 rounds, 125 s, against 5 rounds, 385 s,
+but let a channel that fits badly lower its own weight as it goes: dev plant 10 ended with
+phi levels of 0.5 rad, a wrong fit called a success, where solving each round at fixed levels
+does not. Measured 2026-11-26, docs/studies/.)
 """
 
 from __future__ import annotations
@@ -54,41 +54,15 @@ WARM_COST_RTOL = 1e-6
 REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
 
 
-class ChannelLevels:
-    """The re-weighting rule of a round's solve: at an accepted iterate, each channel's level
-    is its residual rms [SI] floored at its sensor's std; once one differs from the level in
-    use by more than ``NOISE_RTOL`` (log), all are set and the weights rescaled.
-
-    ``std`` (n_y,) [SI]: the levels in use (the round's start, then the last set)."""
-
-    def __init__(self, ms: MultipleShooting, std: np.ndarray, sensor_std: np.ndarray):
-        self.std = np.asarray(std, dtype=float).copy()
-        self.sensor_std = np.asarray(sensor_std, dtype=float)
-        self.counts = np.count_nonzero(ms.weight > 0, axis=(0, 1))
-
-    def __call__(self, ev: Evaluation) -> np.ndarray | None:
-        """Factors (n_y,) for the weights, or None while every level is within tolerance."""
-        squares = np.sum(ev.residual**2, axis=(0, 1))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            rms = np.sqrt(squares / self.counts) * self.std
-        levels = np.where(self.counts > 0, np.maximum(rms, self.sensor_std), self.std)
-        if np.max(np.abs(np.log(levels / self.std))) <= NOISE_RTOL:
-            return None
-        factors = self.std / levels
-        self.std = levels
-        return factors
-
-
 def channel_rms(ms: MultipleShooting, ev: Evaluation) -> dict[str, float]:
-    """Residual rms of each output channel over its valid samples [SI] (the residuals
-    divided by the weights the transcription holds)."""
+    """Residual rms of each output channel over its valid samples [SI]."""
+    problem = ms.problem
     used = ms.weight > 0
     rms = {}
-    for j, name in enumerate(ms.problem.output_names):
-        valid = used[:, :, j]
-        n = int(np.count_nonzero(valid))
-        errors = ev.residual[:, :, j][valid] / ms.weight[:, :, j][valid]
-        rms[name] = math.sqrt(float(np.sum(errors**2)) / n) if n else math.nan
+    for j, name in enumerate(problem.output_names):
+        n = int(np.count_nonzero(used[:, :, j]))
+        weighted = float(np.sum(ev.residual[:, :, j][used[:, :, j]] ** 2))
+        rms[name] = math.sqrt(weighted / n) * float(problem.channel_std[j]) if n else math.nan
     return rms
 
 
@@ -106,7 +80,7 @@ def estimate_noise(
     the last that stalls is re-weighted from where it stopped.
 
     Returns (problem, transcription, state, solver, rounds, settling), the problem weighted
-    by the levels the fit converged under; ``settling``: the largest relative change (in
+    by the levels of the last round; ``settling``: the largest relative change (in
     log) of a level over the last round, and whether it met ``NOISE_RTOL``.
     """
     sensor_std = problem.channel_std
@@ -121,17 +95,9 @@ def estimate_noise(
             rounds -= 1
             break
         problem, ms = _weighted(recordings, problem, std)
-        # Round 1 starts from a point far from any fit at these levels (the stage before
-        # weighed the channels by their sensors): it is solved at fixed levels, a homotopy
-        # step (re-weighting from there led the worn plant of issue 25 to another optimum,
-        # k_l at 1e-4 of the table, its concentrated criterion 0.43 N worse). From its optimum
-        # on, the levels are re-weighted within the solve.
-        levels = ChannelLevels(ms, std, sensor_std) if rounds > 1 else None
         named = zip(problem.output_names, std, strict=True)
         label = f"noise round {rounds} (std {', '.join(f'{k} {v:.3g}' for k, v in named)})"
-        state, gn = warm_solve(ms, state, stages, counter, progress, label, levels)
-        if levels is not None and not np.array_equal(levels.std, std):
-            problem, ms, gn = _reweighted(recordings, problem, levels.std, state, progress)
+        state, gn = warm_solve(ms, state, stages, counter, progress, label)
         if stages[-1].converged:
             accepted = (problem, ms, state, gn, rounds)
     else:
@@ -155,17 +121,6 @@ def _weighted(recordings, problem: FitProblem, std: np.ndarray):
         recordings, problem.initial, replace(problem.options, channel_std=weights)
     )
     return problem, MultipleShooting(problem)
-
-
-def _reweighted(recordings, problem, std, state: SolverState, progress):
-    """A round's end under the levels its solve converged under: the problem, transcription
-    and solver at ``std``, ``state`` evaluated there (the same point, weighed as it was)."""
-    problem, ms = _weighted(recordings, problem, std)
-    gn = GaussNewton(ms.uniform(), progress, freeze_sloppy=True)
-    state.evaluation = gn.ms.evaluate(
-        state.nodes, state.theta, problem.smoothing, velocity_hint=state.velocity_hint
-    )
-    return problem, ms, gn
 
 
 def noise_levels(ms, state: SolverState, sensor_std: np.ndarray) -> np.ndarray:
@@ -192,10 +147,9 @@ def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageR
     )
 
 
-def warm_solve(ms, start: SolverState, stages, counter, progress, label, levels=None):
+def warm_solve(ms, start: SolverState, stages, counter, progress, label):
     """Every window, exact continuity, from ``start``'s nodes and parameters, monotone (no
-    step may raise the merit: a warm start is kept, not thrown away by free steps), the
-    channels re-weighted by ``levels`` (a ``ChannelLevels``) as the solve goes. With
+    step may raise the merit: a warm start is kept, not thrown away by free steps). With
     estimated levels a stall counts as converged only with its defects at ``defect_tol``
     (or closed by simulation), see ``GaussNewton.run``. Returns (state, solver)."""
     ms = ms.uniform()
@@ -210,7 +164,6 @@ def warm_solve(ms, start: SolverState, stages, counter, progress, label, levels=
             radius=0.5,
             watchdog=False,
             stall_defect_tol=ms.problem.options.defect_tol,
-            reweight=levels,
         )
     )
     counter["evaluations"] += gn.evaluations

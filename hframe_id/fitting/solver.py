@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -202,16 +201,6 @@ class GaussNewton(CondensedModel):
         #: optimum; far from it a parameter can look undetermined only transiently).
         self.freeze_sloppy = freeze_sloppy
 
-    def rescale_channels(self, ev: Evaluation, factors: np.ndarray) -> None:
-        """Multiply each output channel's weight by ``factors`` (n_y,): the transcription's
-        weights (a new array: transcriptions sharing the old one keep it) and, in place,
-        ``ev``'s residuals and their Jacobians (the same samples under the new weights)."""
-        self.ms.weight = self.ms.weight * factors
-        ev.residual *= factors
-        if ev.jac_node is not None:
-            ev.jac_node *= factors[:, None]
-            ev.jac_theta *= factors[:, None]
-
     def _evaluate(self, state: SolverState, nodes, theta, smoothing) -> Evaluation:
         self.evaluations += 1
         return self.ms.evaluate(nodes, theta, smoothing, velocity_hint=state.velocity_hint)
@@ -248,7 +237,6 @@ class GaussNewton(CondensedModel):
         watchdog: bool = True,
         give_up: int | None = None,
         stall_defect_tol: float = STALL_DEFECT_TOL,
-        reweight: Callable[[Evaluation], np.ndarray | None] | None = None,
     ) -> StageReport:
         """Iterate one stage until converged; updates ``state`` in place.
 
@@ -269,9 +257,6 @@ class GaussNewton(CondensedModel):
         ``defect_tol`` (no such acceptance): defects of 2 estimated std let a discontinuous
         trajectory follow data its model cannot.
 
-        ``reweight`` (monotone stages): called at every accepted iterate with its evaluation;
-        it returns factors (n_y,) for the channels' weights, or None to keep them. Re-weighted,
-        the merit is another function: the best iterate and the cost history restart there.
         """
         start = time.perf_counter()
         ms = self.ms
@@ -292,7 +277,7 @@ class GaussNewton(CondensedModel):
         for iterations in range(1, max_iterations + 1):
             trial = self._trial(walk, state, smoothing, iterations)
             if trial.accepted:
-                self._accept(walk, state, trial, iterations, reweight)
+                self._accept(walk, state, trial, iterations)
             ev = state.evaluation
             if trial.overflowed:
                 message = (
@@ -491,22 +476,15 @@ class GaussNewton(CondensedModel):
                 return trial_a, new_a, nodes_a, theta_a, alpha
         return None
 
-    def _accept(self, walk: _Walk, state: SolverState, trial: _Trial, iterations: int, reweight):
-        """Move to the accepted step; re-weight, or keep the watchdog's books (and return to
-        the best iterate, with a smaller region, once it has not improved for a while)."""
+    def _accept(self, walk: _Walk, state: SolverState, trial: _Trial, iterations: int):
+        """Move to the accepted step and keep the watchdog's books (returning to the best
+        iterate, with a smaller region, once it has not improved for a while)."""
         ms = self.ms
         state.nodes, state.theta, ev = trial.nodes, trial.theta, trial.evaluation
         state.evaluation = ev
         state.velocity_hint = ev.states[:, :, ms.nq :]
         value = walk.merit(ev, state.nodes)
-        factors = None if reweight is None else reweight(ev)
-        if factors is not None:
-            self.rescale_channels(ev, factors)
-            walk.best = (walk.merit(ev, state.nodes), state.nodes, state.theta, ev)
-            walk.since_best = 0
-            walk.best_history.clear()
-            walk.costs.clear()
-        elif (not walk.monotone and iterations <= FREE_STEPS) or value < walk.best[0]:
+        if (not walk.monotone and iterations <= FREE_STEPS) or value < walk.best[0]:
             walk.best = (value, state.nodes, state.theta, ev)
             walk.since_best = 0
         else:

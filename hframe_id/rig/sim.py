@@ -144,7 +144,7 @@ class SimRig(Rig):
             delay = self._t0 + k * self.info.sample_period_s - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
-        y = np.asarray(self.model.output(self._x)).ravel()
+        y = np.asarray(self.model.output_map(self._x, self._output_now, self._p)).ravel()
         counts, laser, valid = self._readout.read(self._lagged(y))
         limits = {}
         for axis, column in self._axis_columns.items():

@@ -13,7 +13,7 @@ import numpy as np
 
 from hframe_id.control.declaration import ControllerDeclaration
 from hframe_id.control.loop import check_fits
-from hframe_id.errors import ControllerError, OptionError
+from hframe_id.errors import OptionError
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -247,13 +247,6 @@ def validate(
     if options.controller is not None:
         for params in parameter_sets:
             model = build_model(params.variant)
-            if model.output is None:
-                outputs = ", ".join(s.name for s in model.outputs)
-                raise ControllerError(
-                    f"controller {options.controller.name!r}: model {model.variant} has an "
-                    f"output that depends on its inputs or parameters (outputs: {outputs}); a "
-                    "closed loop reads outputs that are functions of the state alone"
-                )
             for rec in recordings:
                 check_fits(options.controller, model, rec)
                 options.controller.sample_period(rec)
