@@ -163,3 +163,12 @@ def test_recordings_already_made_are_prior_information(table, design):
     d = Criterion("D")
     with_prior = d.value(after.information.matrix + after.prior[0])
     assert with_prior <= d.value(design.information.matrix + after.prior[0]) + 1e-9
+
+
+@pytest.mark.parametrize("duration_s", [0.1, 0.2, 1.0, 4.0])
+def test_baselines_fit_any_duration_within_the_voltage(duration_s):
+    layout = Layout(duration_s)
+    for table in (prbs(layout, 6.0), multisine(layout, 6.0)):
+        assert table.shape == (layout.samples, 2)
+        assert np.max(np.abs(table)) == pytest.approx(6.0)
+        assert not table[: layout.pre_roll].any()
