@@ -315,13 +315,19 @@ def design_experiment(
             )
         priors.append(prior)
     reach_ok = np.all(overshoot <= 0, axis=0)
-    nominal_total = sum(candidates[0][c] for c in np.flatnonzero(reach_ok))
-    if not np.any(reach_ok) or not np.any(np.diag(nominal_total) > 0):
+    travel = ", ".join(f"{a}={lo:g}:{hi:g} m" for a, (lo, hi) in limits.travel_m.items())
+    if not np.any(reach_ok):
         raise OptionError(
-            f"no free parameter with information: no doublet of up to "
-            f"{limits.max_voltage_v:g} V moves the model of {params.where()} within the travel "
-            f"({', '.join(f'{a}={lo:g}:{hi:g} m' for a, (lo, hi) in limits.travel_m.items())}, "
-            f"margin {limits.margin_m:g} m)"
+            f"--travel {travel}: every candidate block of up to {limits.max_voltage_v:g} V "
+            f"moves the model of {params.where()} past the travel less the "
+            f"{limits.margin_m:g} m margin; lower --max-voltage or widen --travel"
+        )
+    nominal_total = sum(candidates[0][c] for c in np.flatnonzero(reach_ok))
+    if not np.any(np.diag(nominal_total) > 0):
+        raise OptionError(
+            f"no free parameter with information: no block of up to {limits.max_voltage_v:g} V "
+            f"moves the model of {params.where()} within the travel ({travel}, margin "
+            f"{limits.margin_m:g} m)"
         )
     if focus_index is not None:
         blind = [names[i] for i in focus_index if not nominal_total[i, i] > 0]

@@ -72,3 +72,11 @@ def test_existing_outputs_need_force(tmp_path, capsys):
     (tmp_path / "design.md").write_text("mine")
     refused(argv(tmp_path / "design.csv"), capsys, "design.md", "--force")
     assert (tmp_path / "design.md").read_text() == "mine"
+
+
+def test_a_travel_no_block_keeps_is_refused(tmp_path, capsys):
+    """+/-0.1 mm inside the margin: even 16 doublets in 0.5 s move the model farther."""
+    out = tmp_path / "design.csv"
+    travel = ["--travel", "x=-0.0101:0.0101", "--travel", "y=-0.0101:0.0101"]
+    refused(argv(out, "--margin", "0.01", travel=travel), capsys, "--travel", "every candidate")
+    assert not any(tmp_path.iterdir())
