@@ -80,3 +80,22 @@ def test_a_travel_no_block_keeps_is_refused(tmp_path, capsys):
     travel = ["--travel", "x=-0.0101:0.0101", "--travel", "y=-0.0101:0.0101"]
     refused(argv(out, "--margin", "0.01", travel=travel), capsys, "--travel", "every candidate")
     assert not any(tmp_path.iterdir())
+
+
+def test_recordings_to_add_or_calibrate_with_must_be_recordings(tmp_path, capsys):
+    text = tmp_path / "notes.mcap"
+    text.write_text("not a recording")
+    refused(argv(tmp_path / "design.csv", "--after", text), capsys, "notes.mcap")
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.mcap"]
+
+
+def test_calibrating_a_table_that_reports_no_errors_is_refused(tmp_path, capsys):
+    """Calibration compares a fit's reported errors with the predicted ones: a table has
+    none to compare with."""
+    recording = tmp_path / "step.mcap"
+    record = "record --rig sim --protocol step --v1 2 --v2 2 --step 0.2 --duration 0.3 --fast"
+    options = [*record.split(), "--quiet", "--params", TABLE, "--out", recording]
+    assert main([str(a) for a in options]) == 0
+    capsys.readouterr()
+    refused(argv(tmp_path / "design.csv", "--calibrate", recording), capsys, "--calibrate")
+    assert [p.name for p in tmp_path.iterdir()] == ["step.mcap"]
