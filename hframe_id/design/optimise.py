@@ -45,7 +45,7 @@ from hframe_id.design.information import (
     experiment_information,
     fitted_channel_std,
 )
-from hframe_id.errors import OptionError
+from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting.options import FitOptions
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.sensors import SensorModel
@@ -176,17 +176,23 @@ class Design:
 
 
 def free_parameters(params: ParameterSet, free: Sequence[str] | None) -> tuple[str, ...]:
-    """The free parameters: ``free``, else the fit's that made the file
-    (``provenance.free_parameters``), else the model's default free set."""
-    from hframe_id.fitting.problem import default_free
+    """The free parameters: ``free`` (names or patterns, as ``hframe-id fit --free``), else
+    the fit's that made the file (``provenance.free_parameters``), else the model's default
+    free set."""
+    from hframe_id.fitting.problem import default_free, resolve_free
     from hframe_id.models import build_model
 
+    model = build_model(params.variant)
     if free:
-        return tuple(free)
+        wanted = FitOptions(free=tuple(free)).for_model(params.variant).problem_options
+        try:
+            return tuple(resolve_free(model, wanted))
+        except FitError as err:
+            raise OptionError(f"--free {','.join(free)}: {err}") from None
     fitted = params.provenance.get("free_parameters")
     if isinstance(fitted, list) and fitted:
         return tuple(str(n) for n in fitted)
-    return tuple(default_free(build_model(params.variant)))
+    return tuple(default_free(model))
 
 
 def relative_spread(params: ParameterSet, names: Sequence[str]) -> dict[str, float]:

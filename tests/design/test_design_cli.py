@@ -62,9 +62,13 @@ def test_a_voltage_below_one_dac_step_informs_nothing(tmp_path, capsys):
     assert not any(tmp_path.iterdir())
 
 
-def test_focus_names_a_free_parameter(tmp_path, capsys):
+@pytest.mark.parametrize(
+    ("option", "value", "suggested"),
+    [("--focus", "F_c_crt", "F_c_cart"), ("--free", "k_q", "k_r")],
+)
+def test_focus_and_free_name_parameters(tmp_path, capsys, option, value, suggested):
     out = tmp_path / "design.csv"
-    refused(argv(out, "--focus", "F_c_crt"), capsys, "--focus", "F_c_crt", "F_c_cart")
+    refused(argv(out, option, value, "--draws", "2"), capsys, option, value, suggested)
     assert not any(tmp_path.iterdir())
 
 
