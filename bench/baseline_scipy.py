@@ -48,7 +48,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from hframe_id.errors import FitError, OptionError
-from hframe_id.fitting.problem import applied_inputs, default_channel_std
+from hframe_id.fitting.experiment import applied_inputs, default_channel_std
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording

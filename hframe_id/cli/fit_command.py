@@ -12,9 +12,10 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from hframe_id.cli.fit_options import fit_options
 from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import check_dir
-from hframe_id.errors import FitError, OptionError
+from hframe_id.errors import FitError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.options import (
     CONSIDER_METHODS,
@@ -35,34 +36,6 @@ if TYPE_CHECKING:  # the fitting itself (CasADi, SciPy) is imported when a fit r
 #: Where bare recording names are looked up: the working directory's datasets/, then the
 #: shipped datasets/ (the checkout's, or an installed package's).
 DATASETS_DIRS = (Path("datasets"), datasets_dir())
-
-
-def _names(text: str) -> tuple[str, ...]:
-    return tuple(part.strip() for part in text.split(",") if part.strip())
-
-
-def _pairs(items: list[str], what: str) -> dict[str, str]:
-    pairs = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name or not value:
-            raise OptionError(f"{what} must look like NAME=VALUE, got {item!r}")
-        pairs[name.strip()] = value.strip()
-    return pairs
-
-
-def _float(text: str, what: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise OptionError(f"{what}: {text!r} is not a number") from None
-
-
-def _samples(text: str, what: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise OptionError(f"{what}: {text!r} is not a whole number of samples") from None
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -91,6 +64,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
         formatter_class=_HelpFormatter,
     )
+    _add_data_options(parser)
+    _add_parameter_options(parser)
+    _add_noise_options(parser)
+    _add_transcription_options(parser)
+    _add_strategy_options(parser)
+    _add_convergence_options(parser)
+    _add_statistics_options(parser)
+    _add_output_options(parser)
+    parser.set_defaults(handler=run)
+
+
+def _add_data_options(parser: argparse.ArgumentParser) -> None:
+    """The recordings and the start: ``files``, ``--initial``, ``--model``."""
     parser.add_argument(
         "files",
         nargs="+",
@@ -113,6 +99,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "the model of the --model-file, else the recordings' rig variant); picks the default "
         "initial file",
     )
+
+
+def _add_parameter_options(parser: argparse.ArgumentParser) -> None:
+    """Which parameters are free and their bounds [SI units]."""
     parser.add_argument(
         "--free",
         metavar="NAMES",
@@ -142,6 +132,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=10.0,
         help="default bounds: initial value divided / multiplied by this",
     )
+
+
+def _add_noise_options(parser: argparse.ArgumentParser) -> None:
+    """How the residuals are weighted: the channels' noise std [rad or m]."""
     parser.add_argument(
         "--channel-std",
         metavar="OUTPUT=STD",
@@ -159,6 +153,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "noise model); 'estimate' noise levels estimated from the residuals; 'auto' "
         "estimated when the model does not follow the data at the sensors' noise level",
     )
+
+
+def _add_transcription_options(parser: argparse.ArgumentParser) -> None:
+    """The solver of the all-window stages and the transcription it solves: sensor latency
+    [samples], shooting intervals [samples], continuity, Coulomb smoothing, initial states."""
     parser.add_argument(
         "--solver",
         choices=solver_names(),
@@ -214,6 +213,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "ones) where the record's first 10 samples show rest, estimated where it starts in "
         "motion (auto); every one at rest; or every one estimated",
     )
+
+
+def _add_strategy_options(parser: argparse.ArgumentParser) -> None:
+    """The stages: zero-reachable friction, known points, the multistart portfolio, the start."""
     parser.add_argument(
         "--zero-reachable",
         default="",
@@ -257,6 +260,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="skip the equation-error start and the stages on the moving windows (start the "
         "full multiple-shooting problem directly from --initial)",
     )
+
+
+def _add_convergence_options(parser: argparse.ArgumentParser) -> None:
+    """When a stage has converged: iterations, step and defect tolerances."""
     add_number(
         parser,
         "--max-iterations",
@@ -284,6 +291,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "residuals are at the noise level (rms <= 1.5 std), and the largest defect is "
         "reported in the solver message",
     )
+
+
+def _add_statistics_options(parser: argparse.ArgumentParser) -> None:
+    """Identifiability, the misfit limit [noise std] and how standard errors are computed."""
     add_number(
         parser,
         "--identifiability-threshold",
@@ -319,6 +330,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "parameter at its value x exp(+/-0.2): slower, for effects that are not linear) or "
         "'prior' (estimated, with the prior as a penalty: maximum a posteriori)",
     )
+
+
+def _add_output_options(parser: argparse.ArgumentParser) -> None:
+    """Threads, cross-validation and what is written where (files, stderr, JSON on stdout)."""
     add_number(
         parser,
         "--threads",
@@ -344,7 +359,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="print one JSON object on stdout (success, fit id, files, every parameter with "
         "unit, std and 95 %% interval; docs/fitting-json.md); the summary goes to stderr",
     )
-    parser.set_defaults(handler=run)
 
 
 def resolve_dataset(name: str) -> Path:
@@ -361,62 +375,6 @@ def resolve_dataset(name: str) -> Path:
             return candidate
     looked = ", ".join(f"{d}/" for d in DATASETS_DIRS)
     raise FitError(f"{name}: no such recording (also looked in {looked})")
-
-
-def _options(args: argparse.Namespace) -> FitOptions:
-    from hframe_id.models.declaration import FIT_DEFAULT_KEYS
-
-    bounds = {}
-    for name, text in _pairs(args.bounds, "--bounds").items():
-        low, sep, high = text.partition(":")
-        if not sep:
-            raise OptionError(f"--bounds {name}: expected LOW:HIGH, got {text!r}")
-        bounds[name] = (_float(low, f"--bounds {name}"), _float(high, f"--bounds {name}"))
-    channel_std = {
-        name: _float(value, f"--channel-std {name}")
-        for name, value in _pairs(args.channel_std, "--channel-std").items()
-    }
-    smoothing = None
-    if args.smoothing:
-        parts = _names(args.smoothing)
-        smoothing = tuple(_float(p, "--smoothing") for p in parts)
-    extra = {"threads": args.threads} if args.threads is not None else {}
-    return FitOptions(
-        free=_names(args.free) if args.free else None,
-        fix=_names(args.fix),
-        bounds=bounds,
-        bound_factor=args.bound_factor,
-        channel_std=channel_std,
-        noise=args.noise,
-        solver=args.solver,
-        latency_samples={
-            name: _samples(value, f"--latency {name}")
-            for name, value in _pairs(args.latency, "--latency").items()
-        },
-        **{
-            name: getattr(args, name)
-            for name in FIT_DEFAULT_KEYS
-            if getattr(args, name) is not None
-        },
-        smoothing=smoothing,
-        smoothing_schedule=tuple(
-            _float(p, "--smoothing-schedule") for p in _names(args.smoothing_schedule)
-        ),
-        first_stage=not args.no_first_stage,
-        initial_state=args.initial_state,
-        zero_reachable=_names(args.zero_reachable) if args.zero_reachable else (),
-        starts=args.starts,
-        start_seed=args.start_seed,
-        max_iterations=args.max_iterations,
-        step_tol=args.step_tol,
-        defect_tol=args.defect_tol,
-        identifiability_threshold=args.identifiability_threshold,
-        max_misfit=args.max_misfit,
-        uncertainty=args.uncertainty,
-        consider_method=args.consider_method,
-        verbose=0 if args.quiet else 1,
-        **extra,
-    )
 
 
 def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path]:
@@ -569,7 +527,7 @@ def run(args: argparse.Namespace) -> int:
 
     Exit status 0 on success, 1 if the fit failed (then no parameter file is written).
     """
-    options = _options(args)
+    options = fit_options(args)
     out_dir = check_dir(args.out_dir, "--out-dir")
     # The figure worker starts first: it imports matplotlib while this process reads the
     # inputs and imports the fitter (both single-threaded; the solve uses every core).

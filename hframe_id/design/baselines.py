@@ -5,7 +5,8 @@
 - ``prbs``: a pseudo-random binary sequence of +/- the voltage limit on each motor (MATLAB
   ``idinput``'s kind, seeded), switching with probability 1/2 every ``PRBS_CLOCK_S``;
 - ``multisine``: ``MultisineProtocol``'s random-phase multisine over the record after the
-  pre-roll (its default band, 0.5-10 Hz), scaled so that its peak is the voltage limit.
+  pre-roll (its default band, 0.5-10 Hz, widened to the record's second harmonic for records
+  shorter than 0.2 s), scaled so that its peak is the voltage limit.
 
 The PRBS and the multisine have the design's duration and voltage limit.
 """
@@ -46,9 +47,11 @@ def multisine(layout: Layout, max_voltage_v: float, seed: int = BASELINE_SEED) -
     """(N, 2) voltages [V]: ``MultisineProtocol`` over the record after the pre-roll,
     scaled to a peak of ``max_voltage_v`` on the motor with the larger one."""
     period = layout.samples * layout.sample_period_s - PRE_ROLL_S
+    low, high = MULTISINE_BAND_HZ
     table = MultisineProtocol(
         1.0,
-        *MULTISINE_BAND_HZ,
+        low,
+        max(high, 2.0 / period),  # a record too short for 10 Hz: its two lowest harmonics
         period,
         layout.samples * layout.sample_period_s,
         PRE_ROLL_S,

@@ -45,7 +45,7 @@ from hframe_id.design.information import (
     experiment_information,
     fitted_channel_std,
 )
-from hframe_id.errors import OptionError
+from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting.options import FitOptions
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.sensors import SensorModel
@@ -176,17 +176,23 @@ class Design:
 
 
 def free_parameters(params: ParameterSet, free: Sequence[str] | None) -> tuple[str, ...]:
-    """The free parameters: ``free``, else the fit's that made the file
-    (``provenance.free_parameters``), else the model's default free set."""
-    from hframe_id.fitting.problem import default_free
+    """The free parameters: ``free`` (names or patterns, as ``hframe-id fit --free``), else
+    the fit's that made the file (``provenance.free_parameters``), else the model's default
+    free set."""
+    from hframe_id.fitting.problem import default_free, resolve_free
     from hframe_id.models import build_model
 
+    model = build_model(params.variant)
     if free:
-        return tuple(free)
+        wanted = FitOptions(free=tuple(free)).for_model(params.variant).problem_options
+        try:
+            return tuple(resolve_free(model, wanted))
+        except FitError as err:
+            raise OptionError(f"--free {','.join(free)}: {err}") from None
     fitted = params.provenance.get("free_parameters")
     if isinstance(fitted, list) and fitted:
         return tuple(str(n) for n in fitted)
-    return tuple(default_free(build_model(params.variant)))
+    return tuple(default_free(model))
 
 
 def relative_spread(params: ParameterSet, names: Sequence[str]) -> dict[str, float]:
@@ -315,13 +321,19 @@ def design_experiment(
             )
         priors.append(prior)
     reach_ok = np.all(overshoot <= 0, axis=0)
-    nominal_total = sum(candidates[0][c] for c in np.flatnonzero(reach_ok))
-    if not np.any(reach_ok) or not np.any(np.diag(nominal_total) > 0):
+    travel = ", ".join(f"{a}={lo:g}:{hi:g} m" for a, (lo, hi) in limits.travel_m.items())
+    if not np.any(reach_ok):
         raise OptionError(
-            f"no free parameter with information: no doublet of up to "
-            f"{limits.max_voltage_v:g} V moves the model of {params.where()} within the travel "
-            f"({', '.join(f'{a}={lo:g}:{hi:g} m' for a, (lo, hi) in limits.travel_m.items())}, "
-            f"margin {limits.margin_m:g} m)"
+            f"--travel {travel}: every candidate block of up to {limits.max_voltage_v:g} V "
+            f"moves the model of {params.where()} past the travel less the "
+            f"{limits.margin_m:g} m margin; lower --max-voltage or widen --travel"
+        )
+    nominal_total = sum(candidates[0][c] for c in np.flatnonzero(reach_ok))
+    if not np.any(np.diag(nominal_total) > 0):
+        raise OptionError(
+            f"no free parameter with information: no block of up to {limits.max_voltage_v:g} V "
+            f"moves the model of {params.where()} within the travel ({travel}, margin "
+            f"{limits.margin_m:g} m)"
         )
     if focus_index is not None:
         blind = [names[i] for i in focus_index if not nominal_total[i, i] > 0]

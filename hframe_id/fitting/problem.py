@@ -5,7 +5,8 @@ A fit is a weighted output-error least-squares problem over one or more experime
     min  1/2 sum_e sum_k sum_j  w_j^2 (y_j(t_k; x0_e, p) - y_meas_j,k)^2    over x0_e, p_free
 
 with w_j = 1 / std_j (encoder quantization step / sqrt(12), laser noise), invalid samples left
-out, free parameters in log scale, theta = ln(p / p_initial), within bounds. The transcription
+out, free parameters in log scale, theta = ln(p / p_initial), within bounds. The recordings
+on the model's channels are prepared in :mod:`hframe_id.fitting.experiment`; the transcription
 (multiple shooting) and the solver (Gauss-Newton) live in their own modules.
 """
 
@@ -21,24 +22,17 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
+from hframe_id.fitting.experiment import (
+    Experiment,
+    check_rigs,
+    default_channel_std,
+    encoder_step,
+    prepare_experiment,
+)
 from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-from hframe_id.recordings.sensors import ENCODER_OUTPUTS, LASER_OUTPUTS, SensorModel
-
-#: Rig metadata keys that identify a physical rig (or the sim plant); recordings fitted
-#: jointly must agree on every one of them that both carry.
-RIG_IDENTITY_KEYS = (
-    "rig_id",
-    "name",
-    "serial",
-    "backend",
-    "plant",
-    "encoder_counts_per_rev",
-    "laser_noise_std_m",
-    "dac_bits",
-)
 
 #: A record starts at rest (``starts_at_rest``) unless some channel's velocity at its first
 #: sample, fitted over its first ``REST_SAMPLES``, differs from zero by more than ``REST_Z``
@@ -51,27 +45,6 @@ REST_SAMPLES = 10
 #: A window needs at least this many valid output values per free quantity it brings; a
 #: whole record needs this many valid values per estimated quantity (states + parameters).
 MIN_VALID_PER_UNKNOWN = 5
-
-
-@dataclass(frozen=True)
-class Experiment:
-    """One recording, prepared for fitting (SI, samples on the model's output order)."""
-
-    name: str
-    inputs: np.ndarray  # (N, n_u) voltages the plant saw [V] (after the DAC)
-    outputs: np.ndarray  # (N, n_y) measurements, NaN where missing
-    valid: np.ndarray  # (N, n_y) bool: usable samples
-    recording: Recording
-    #: True where the record starts at rest (``FitOptions.initial_state``): its initial
-    #: velocities are zero, not estimated; its positions are (a sensor's offset within its
-    #: resolution: an encoder's quantization phase is up to one step, 1.7 std, for the
-    #: whole record, which averaging cannot remove)
-    at_rest: bool = False
-
-    @property
-    def n_samples(self) -> int:
-        """Samples in the experiment."""
-        return int(self.inputs.shape[0])
 
 
 @dataclass(frozen=True)
@@ -238,148 +211,6 @@ def held_priors(model: Model, options: ProblemOptions) -> dict[str, float]:
     return {n: s for n, s in priors.items() if n not in fixed}
 
 
-def rig_dac(rig: dict) -> SensorModel | None:
-    """The rig's DAC (``dac_bits``, ``dac_min_v`` [V], ``dac_max_v`` [V] in its metadata) as a
-    sensor model, or None when the metadata do not describe one."""
-    if not all(k in rig for k in ("dac_bits", "dac_min_v", "dac_max_v")):
-        return None
-    return SensorModel(
-        dac_bits=int(rig["dac_bits"]),
-        dac_min_v=float(rig["dac_min_v"]),
-        dac_max_v=float(rig["dac_max_v"]),
-    )
-
-
-def applied_inputs(recording: Recording) -> np.ndarray:
-    """Voltages the plant saw [V]: the recording's applied voltages if it has them, else the
-    commanded ones through the rig's DAC when its metadata describe one (``rig_dac``)."""
-    applied = getattr(recording, "applied", None)
-    if applied is not None:
-        return np.asarray(applied, dtype=float)
-    dac = rig_dac(recording.rig)
-    if dac is not None:
-        return dac.dac(recording.inputs)
-    return np.asarray(recording.inputs, dtype=float)
-
-
-def encoder_step(recording: Recording, output: str) -> float:
-    """Quantization step [rad] of an encoder channel (angles), 0 for other channels or when
-    the rig metadata do not give the resolution."""
-    counts = recording.rig.get("encoder_counts_per_rev")
-    if not output.startswith("phi") or counts is None:
-        return 0.0
-    return 2 * math.pi / float(counts)
-
-
-def data_noise_std(recording: Recording, output: str) -> float:
-    """Noise std of an output estimated from the data alone [SI]: the robust spread of its
-    second differences, sigma = 1.4826 MAD(d2 y) / sqrt(6) (white noise e gives d2 e a variance
-    of 6 sigma^2; a motion smooth over a few samples adds little to d2 y)."""
-    j = recording.output_names.index(output)
-    y = recording.outputs[:, j]
-    second = np.diff(y[recording.valid[:, j] & np.isfinite(y)], 2)
-    sigma = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6)
-    if not sigma > 0:
-        # Quantized or piecewise-constant data: the median difference is 0; use the rms.
-        sigma = float(np.sqrt(np.mean(second**2)) / math.sqrt(6)) if second.size else 0.0
-    if not sigma > 0:
-        raise FitError(
-            f"{recording.name()}: cannot estimate the noise of {output} from the data (it does "
-            f"not vary); give channel_std for {output}"
-        )
-    return sigma
-
-
-def default_channel_std(recording: Recording, output: str, model: Model | None = None) -> float:
-    """Noise std of an output channel [SI]: the rig's declaration (``noise_std_<output>``: a
-    value, or "estimate": ``data_noise_std``), else the sensor noise the ``model``'s
-    ``Output`` declares, else the H-frame rig's sensors (encoder quantization, laser noise)
-    from its metadata."""
-    rig = recording.rig
-    declared = recording.declared_noise_std(output)
-    if declared == "estimate":
-        return data_noise_std(recording, output)
-    if declared is not None:
-        return float(declared)
-    sensor = None if model is None else model.declaration.output_noise_std(output)
-    if sensor is not None:
-        return float(sensor)
-    if output not in ENCODER_OUTPUTS + LASER_OUTPUTS:
-        raise FitError(
-            f"{recording.name()}: rig metadata declare no noise_std_{output}; give channel_std "
-            f"for {output} (or noise_std in the model's Output declaration)"
-        )
-    if output.startswith("phi"):
-        counts = rig.get("encoder_counts_per_rev")
-        if counts is None:
-            raise FitError(
-                f"{recording.name()}: rig metadata lack encoder_counts_per_rev; give "
-                f"channel_std for {output}"
-            )
-        return 2 * math.pi / float(counts) / math.sqrt(12)
-    noise = rig.get("laser_noise_std_m")
-    if noise is None or not float(noise) > 0:
-        raise FitError(
-            f"{recording.name()}: rig metadata lack laser_noise_std_m; give channel_std for "
-            f"{output}"
-        )
-    return float(noise)
-
-
-def _check_rigs(recordings: Sequence[Recording]) -> None:
-    first = recordings[0]
-    for rec in recordings[1:]:
-        if rec.variant != first.variant:
-            raise FitError(
-                f"cannot fit recordings of different model variants jointly: "
-                f"{first.name()} is {first.variant}, {rec.name()} is {rec.variant}"
-            )
-        for key in RIG_IDENTITY_KEYS:
-            if key in first.rig and key in rec.rig and str(first.rig[key]) != str(rec.rig[key]):
-                raise FitError(
-                    f"cannot fit recordings of different rigs jointly: rig {key} is "
-                    f"{first.rig[key]!r} in {first.name()} but {rec.rig[key]!r} in {rec.name()}"
-                )
-        if not math.isclose(rec.sample_period_s, first.sample_period_s, rel_tol=1e-9):
-            raise FitError(
-                f"recordings have different sample periods: {first.sample_period_s} s "
-                f"({first.name()}) and {rec.sample_period_s} s ({rec.name()})"
-            )
-
-
-def _prepare(rec: Recording, model: Model, latency: dict[str, int]) -> Experiment:
-    """The recording on the model's inputs and outputs; a channel with a latency of d
-    samples (``FitOptions.latency_samples``) is advanced by d, its last d samples invalid."""
-    inputs = applied_inputs(rec)
-    in_names = [s.name for s in model.inputs]
-    if tuple(rec.input_names) != tuple(in_names):
-        raise FitError(
-            f"{rec.name()}: inputs {list(rec.input_names)} do not match model {model.variant} "
-            f"inputs {in_names}"
-        )
-    columns = []
-    for out in model.outputs:
-        if out.name not in rec.output_names:
-            raise FitError(
-                f"{rec.name()}: no output {out.name!r} (has {list(rec.output_names)}) for model "
-                f"{model.variant}"
-            )
-        columns.append(list(rec.output_names).index(out.name))
-    outputs = np.asarray(rec.outputs, dtype=float)[:, columns]
-    valid = np.asarray(rec.valid, dtype=bool)[:, columns] & np.isfinite(outputs)
-    for j, out in enumerate(model.outputs):
-        lag = latency.get(out.name, 0)
-        if lag:
-            outputs[:-lag, j], valid[:-lag, j] = outputs[lag:, j], valid[lag:, j]
-            valid[-lag:, j] = False
-    if not np.all(np.isfinite(inputs)):
-        raise FitError(f"{rec.name()}: inputs contain non-finite values")
-    if rec.aborted:
-        # An aborted run is still a valid record of what the plant did up to the abort.
-        pass
-    return Experiment(rec.name(), inputs, np.where(valid, outputs, np.nan), valid, rec)
-
-
 def starts_at_rest(
     outputs: np.ndarray,
     valid: np.ndarray,
@@ -439,30 +270,88 @@ def build_problem(
     scale), bounds excluding the initial value, too few valid samples, an output with no
     valid sample, a shooting interval not shorter than a record.
     """
+    recordings = _checked_inputs(recordings, initial)
+    model = build_model(initial.variant)
+    options = options.for_model(initial.variant)
+    wanted = options.problem_options  # what this builder reads; ``options`` is kept whole
+    _check_channels(model, initial, recordings[0])
+    p0 = model.parameter_vector(initial.values)
+    names = list(model.parameter_names)
+    free_names, priors = _free_set(model, wanted)
+    spaces = _parameter_spaces(model, p0, free_names, wanted)
+    free = tuple(names.index(n) for n in free_names)
+    experiments = _experiments(recordings, model, options.shooting_interval, wanted)
+    outputs = [s.name for s in model.outputs]
+    std = np.array(
+        [
+            wanted.channel_std.get(name) or default_channel_std(recordings[0], name, model)
+            for name in outputs
+        ]
+    )
+    sensor_std = np.array([default_channel_std(recordings[0], name, model) for name in outputs])
+    kinds = output_kinds(model)
+    experiments = tuple(_with_initial_state(e, sensor_std, kinds, wanted) for e in experiments)
+    # Only an angle the output is (not a speed or a current named phi...) is an encoder's.
+    quantization = np.array(
+        [
+            encoder_step(recordings[0], name) if kind == "position" else 0.0
+            for name, kind in zip(outputs, kinds, strict=True)
+        ]
+    )
+    _check_sample_counts(model, experiments, len(free))
+    smoothing = wanted.smoothing or model.options.smoothing
+    return FitProblem(
+        model=model,
+        initial=initial,
+        p_initial=p0,
+        free=free,
+        **spaces,
+        experiments=experiments,
+        channel_std=std,
+        quantization=quantization,
+        sample_period_s=float(recordings[0].sample_period_s),
+        smoothing=(float(smoothing[0]), float(smoothing[1])),
+        options=options,
+        prior_weight=np.array([1.0 / priors[n] if n in priors else 0.0 for n in free_names]),
+    )
+
+
+def _checked_inputs(recordings: Sequence[Recording], initial: ParameterSet) -> list[Recording]:
+    """The ``recordings`` as a list: at least one, every one a ``Recording`` of one rig
+    (``check_rigs``), and ``initial`` a ``ParameterSet``; else ``FitError``."""
     recordings = list(recordings)
     if not recordings:
         raise FitError("no recordings to fit")
     for rec in recordings:
         if not isinstance(rec, Recording):
             raise FitError(f"expected Recording objects, got {type(rec).__name__}")
-    _check_rigs(recordings)
+    check_rigs(recordings)
     if not isinstance(initial, ParameterSet):
         raise FitError(f"initial must be a ParameterSet, got {type(initial).__name__}")
-    model = build_model(initial.variant)
-    options = options.for_model(initial.variant)
-    wanted = options.problem_options  # what this builder reads; ``options`` is kept whole
-    if initial.variant != recordings[0].variant:
-        # A different model of the same rig is fine if it has the same inputs and outputs
-        # (hframe-20 on hframe-8 records: phi1, phi2, x, y from u1, u2).
-        rec = recordings[0]
-        if tuple(rec.input_names) != tuple(s.name for s in model.inputs) or not set(
-            s.name for s in model.outputs
-        ) <= set(rec.output_names):
-            raise FitError(
-                f"initial parameters are for {initial.variant} but the recordings are "
-                f"{rec.variant} data ({rec.name()}), with other inputs or outputs"
-            )
-    p0 = model.parameter_vector(initial.values)
+    return recordings
+
+
+def _check_channels(model: Model, initial: ParameterSet, rec: Recording) -> None:
+    """``FitError`` if ``initial`` is of another variant than the recording ``rec`` and its
+    ``model`` has other inputs, or outputs the recording lacks."""
+    if initial.variant == rec.variant:
+        return
+    # A different model of the same rig is fine if it has the same inputs and outputs
+    # (hframe-20 on hframe-8 records: phi1, phi2, x, y from u1, u2).
+    if tuple(rec.input_names) != tuple(s.name for s in model.inputs) or not set(
+        s.name for s in model.outputs
+    ) <= set(rec.output_names):
+        raise FitError(
+            f"initial parameters are for {initial.variant} but the recordings are "
+            f"{rec.variant} data ({rec.name()}), with other inputs or outputs"
+        )
+
+
+def _free_set(model: Model, wanted: ProblemOptions) -> tuple[list[str], dict[str, float]]:
+    """The free parameter names in model order (``resolve_free``, and the held ones estimated
+    with a prior) and those priors ``{name: relative std}`` (``held_priors``); ``FitError``
+    for ``bounds`` or ``zero_reachable`` naming an unknown, not free or not nonnegative
+    parameter."""
     names = list(model.parameter_names)
     free_names = resolve_free(model, wanted)
     priors = held_priors(model, wanted)
@@ -481,6 +370,17 @@ def build_problem(
                 f"zero_reachable: {name} is not a nonnegative parameter (friction), which "
                 "alone may reach 0"
             )
+    return free_names, priors
+
+
+def _parameter_spaces(
+    model: Model, p0: np.ndarray, free_names: Sequence[str], wanted: ProblemOptions
+) -> dict[str, np.ndarray]:
+    """The ``FitProblem`` fields ``theta_lower``, ``theta_upper``, ``box_lower``,
+    ``box_upper`` and ``linear`` of the free parameters starting at ``p0`` (SI, model order):
+    each in log scale or linear, its bounds (``bounds``, else ``default_bounds``) on theta.
+    ``FitError`` for a start or bounds its scale cannot take."""
+    names = list(model.parameter_names)
     lower, upper, box_lower, box_upper, linear = [], [], [], [], []
     for name in free_names:
         value = p0[names.index(name)]
@@ -523,8 +423,22 @@ def build_problem(
             upper.append((high - value) / scale)
         box_lower.append(not given and not (kind == "nonnegative" and straight))
         box_upper.append(not given)
-    free = tuple(names.index(n) for n in free_names)
+    return {
+        "theta_lower": np.array(lower),
+        "theta_upper": np.array(upper),
+        "box_lower": np.array(box_lower, dtype=bool),
+        "box_upper": np.array(box_upper, dtype=bool),
+        "linear": np.array(linear, dtype=bool),
+    }
 
+
+def _experiments(
+    recordings: Sequence[Recording], model: Model, shooting_interval: int, wanted: ProblemOptions
+) -> tuple[Experiment, ...]:
+    """The recordings on the model's channels (``prepare_experiment``) with their
+    ``latency_samples``; ``FitError`` for ``channel_std`` or ``latency_samples`` naming no
+    output, a record not longer than a ``shooting_interval`` [samples], or an output with no
+    valid sample."""
     outputs = [s.name for s in model.outputs]
     for name in wanted.channel_std:
         if name not in outputs:
@@ -539,33 +453,24 @@ def build_problem(
                 f"valid: {', '.join(outputs)}"
             )
     latency = dict(wanted.latency_samples)
-    experiments = tuple(_prepare(rec, model, latency) for rec in recordings)
+    experiments = tuple(prepare_experiment(rec, model, latency) for rec in recordings)
     for e in experiments:
-        if options.shooting_interval >= len(e.valid):
+        if shooting_interval >= len(e.valid):
             raise FitError(
-                f"{e.name}: shooting interval of {options.shooting_interval} samples, but the "
+                f"{e.name}: shooting interval of {shooting_interval} samples, but the "
                 f"record has {len(e.valid)} samples"
             )
         empty = [name for j, name in enumerate(outputs) if not e.valid[:, j].any()]
         if empty:
             raise FitError(f"{e.name}: no valid sample of output {', '.join(empty)}")
-    std = np.array(
-        [
-            wanted.channel_std.get(name) or default_channel_std(recordings[0], name, model)
-            for name in outputs
-        ]
-    )
-    sensor_std = np.array([default_channel_std(recordings[0], name, model) for name in outputs])
-    kinds = output_kinds(model)
-    experiments = tuple(_with_initial_state(e, sensor_std, kinds, wanted) for e in experiments)
-    # Only an angle the output is (not a speed or a current named phi...) is an encoder's.
-    quantization = np.array(
-        [
-            encoder_step(recordings[0], name) if kind == "position" else 0.0
-            for name, kind in zip(outputs, kinds, strict=True)
-        ]
-    )
-    n_unknown = model.n_states * len(experiments) + len(free)
+    return experiments
+
+
+def _check_sample_counts(model: Model, experiments: Sequence[Experiment], n_free: int) -> None:
+    """``FitError`` unless every experiment, and all of them together, have
+    ``MIN_VALID_PER_UNKNOWN`` valid output values per quantity they estimate (the initial
+    states, and the ``n_free`` free parameters)."""
+    n_unknown = model.n_states * len(experiments) + n_free
     n_valid = int(sum(e.valid.sum() for e in experiments))
     for e in experiments:
         if e.valid.sum() < MIN_VALID_PER_UNKNOWN * model.n_states:
@@ -578,25 +483,6 @@ def build_problem(
             f"too few valid samples: {n_valid} output values for {n_unknown} unknowns "
             f"(need >= {MIN_VALID_PER_UNKNOWN} per unknown)"
         )
-    smoothing = wanted.smoothing or model.options.smoothing
-    return FitProblem(
-        model=model,
-        initial=initial,
-        p_initial=p0,
-        free=free,
-        theta_lower=np.array(lower),
-        theta_upper=np.array(upper),
-        box_lower=np.array(box_lower, dtype=bool),
-        box_upper=np.array(box_upper, dtype=bool),
-        linear=np.array(linear, dtype=bool),
-        experiments=experiments,
-        channel_std=std,
-        quantization=quantization,
-        sample_period_s=float(recordings[0].sample_period_s),
-        smoothing=(float(smoothing[0]), float(smoothing[1])),
-        options=options,
-        prior_weight=np.array([1.0 / priors[n] if n in priors else 0.0 for n in free_names]),
-    )
 
 
 def default_bounds(

@@ -31,9 +31,9 @@ import numpy as np
 
 from hframe_id.atomic import replace_atomically, staged_directory
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
+from hframe_id.fitting.experiment import applied_inputs
 from hframe_id.fitting.multistart import reached_best
 from hframe_id.fitting.noise_rounds import MISMATCH_RMS
-from hframe_id.fitting.problem import applied_inputs
 from hframe_id.fitting.report_figures import (
     ExperimentSignals,
     plot_correlation,

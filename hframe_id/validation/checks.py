@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from hframe_id.errors import OptionError
-from hframe_id.fitting.problem import RIG_IDENTITY_KEYS
+from hframe_id.fitting.experiment import RIG_IDENTITY_KEYS
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording

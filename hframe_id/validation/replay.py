@@ -1,7 +1,7 @@
 """A recording replayed through a model: measured and simulated outputs on the model's channels.
 
 Inputs are the voltages the plant saw: the commanded ones through the rig's DAC
-(``hframe_id.fitting.problem.applied_inputs``); the amplifier gains g_i are parameters of the
+(``hframe_id.fitting.experiment.applied_inputs``); the amplifier gains g_i are parameters of the
 model and act inside it. The simulation starts at rest at the first measured positions, as the
 fitter's first node does for a record with a pre-roll, with the belts unstretched: the
 coordinates are the belt-free (rigid) motion that best fits the first sample's valid
@@ -22,10 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hframe_id.fitting.experiment import applied_inputs, default_channel_std
 from hframe_id.fitting.problem import (
     REST_SAMPLES,
-    applied_inputs,
-    default_channel_std,
     output_kinds,
     output_matrix,
     rigid_modes,

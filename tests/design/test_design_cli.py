@@ -62,9 +62,13 @@ def test_a_voltage_below_one_dac_step_informs_nothing(tmp_path, capsys):
     assert not any(tmp_path.iterdir())
 
 
-def test_focus_names_a_free_parameter(tmp_path, capsys):
+@pytest.mark.parametrize(
+    ("option", "value", "suggested"),
+    [("--focus", "F_c_crt", "F_c_cart"), ("--free", "k_q", "k_r")],
+)
+def test_focus_and_free_name_parameters(tmp_path, capsys, option, value, suggested):
     out = tmp_path / "design.csv"
-    refused(argv(out, "--focus", "F_c_crt"), capsys, "--focus", "F_c_crt", "F_c_cart")
+    refused(argv(out, option, value, "--draws", "2"), capsys, option, value, suggested)
     assert not any(tmp_path.iterdir())
 
 
@@ -72,3 +76,30 @@ def test_existing_outputs_need_force(tmp_path, capsys):
     (tmp_path / "design.md").write_text("mine")
     refused(argv(tmp_path / "design.csv"), capsys, "design.md", "--force")
     assert (tmp_path / "design.md").read_text() == "mine"
+
+
+def test_a_travel_no_block_keeps_is_refused(tmp_path, capsys):
+    """+/-0.1 mm inside the margin: even 16 doublets in 0.5 s move the model farther."""
+    out = tmp_path / "design.csv"
+    travel = ["--travel", "x=-0.0101:0.0101", "--travel", "y=-0.0101:0.0101"]
+    refused(argv(out, "--margin", "0.01", travel=travel), capsys, "--travel", "every candidate")
+    assert not any(tmp_path.iterdir())
+
+
+def test_recordings_to_add_or_calibrate_with_must_be_recordings(tmp_path, capsys):
+    text = tmp_path / "notes.mcap"
+    text.write_text("not a recording")
+    refused(argv(tmp_path / "design.csv", "--after", text), capsys, "notes.mcap")
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.mcap"]
+
+
+def test_calibrating_a_table_that_reports_no_errors_is_refused(tmp_path, capsys):
+    """Calibration compares a fit's reported errors with the predicted ones: a table has
+    none to compare with."""
+    recording = tmp_path / "step.mcap"
+    record = "record --rig sim --protocol step --v1 2 --v2 2 --step 0.2 --duration 0.3 --fast"
+    options = [*record.split(), "--quiet", "--params", TABLE, "--out", recording]
+    assert main([str(a) for a in options]) == 0
+    capsys.readouterr()
+    refused(argv(tmp_path / "design.csv", "--calibrate", recording), capsys, "--calibrate")
+    assert [p.name for p in tmp_path.iterdir()] == ["step.mcap"]

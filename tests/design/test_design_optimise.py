@@ -19,6 +19,7 @@ from hframe_id.design.optimise import (
     Limits,
     choose,
     design_experiment,
+    free_parameters,
     parameter_draws,
     relative_spread,
 )
@@ -163,3 +164,19 @@ def test_recordings_already_made_are_prior_information(table, design):
     d = Criterion("D")
     with_prior = d.value(after.information.matrix + after.prior[0])
     assert with_prior <= d.value(design.information.matrix + after.prior[0]) + 1e-9
+
+
+@pytest.mark.parametrize("duration_s", [0.1, 0.2, 1.0, 4.0])
+def test_baselines_fit_any_duration_within_the_voltage(duration_s):
+    layout = Layout(duration_s)
+    for table in (prbs(layout, 6.0), multisine(layout, 6.0)):
+        assert table.shape == (layout.samples, 2)
+        assert np.max(np.abs(table)) == pytest.approx(6.0)
+        assert not table[: layout.pre_roll].any()
+
+
+def test_free_parameters_are_the_fits_names_or_patterns(table):
+    assert free_parameters(table, ("k_*", "M_cart")) == ("k_l", "k_r", "k_b", "M_cart")
+    fitted = replace(table, provenance={"free_parameters": ["k_l", "g_2"]})
+    assert free_parameters(fitted, None) == ("k_l", "g_2")
+    assert "F_c_cart" in free_parameters(table, None)
