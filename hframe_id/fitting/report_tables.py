@@ -52,7 +52,7 @@ def parameter_table(
         "fitted",
         "95 % interval",
         "vs reference",
-        "identified",
+        "status",
     )
     jackknife = result.has_jackknife
     if jackknife:
@@ -65,20 +65,7 @@ def parameter_table(
             continue
         ref = thesis.values.get(est.name) if thesis else None
         diff = _relative_difference(est.estimate, ref, 2) if ref is not None else "n/a"
-        if not result.success:
-            status = "not assessed (fit failed)"
-        elif est.open_ended:
-            status = f"not bounded {est.open_ended} by the data (interval open there)"
-        elif est.at_bound:
-            status = "**at bound** (the box fixes it; interval ends there)"
-        elif est.identified:
-            status = "yes"
-        elif est.name in result.not_identified:
-            status = "**no** (held at initial)"
-        else:
-            status = "poorly determined (kept at estimate)"
-        if est.name in result.prior_names:
-            status += ", with a prior"
+        status = result.status_of(est.name)
         cells = (
             est.key,
             _fmt(ref) if ref is not None else "n/a",

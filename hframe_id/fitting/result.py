@@ -201,6 +201,27 @@ class FitResult:
             self.multistart_statement,
         )
 
+    def status_of(self, name: str) -> str:
+        """The verdict on free parameter ``name``, in the words of the summary, the report
+        and the mismatch statement: not assessed (the fit failed), not bounded on one side
+        by the data, at a bound, identified, held, or poorly determined; with a prior."""
+        est = self.estimates[name]
+        if not self.success:
+            status = "not assessed (fit failed)"
+        elif est.open_ended:
+            status = f"not bounded {est.open_ended} by the data (on the box, interval open)"
+        elif est.at_bound:
+            status = "at bound (the box fixes it; interval ends there)"
+        elif est.identified:
+            status = "identified"
+        elif name in self.not_identified:
+            status = "NOT identified (held at its initial value)"
+        else:
+            status = f"poorly determined (relative std {est.relative_std:.0%}, kept at estimate)"
+        if name in self.prior_names:
+            status += ", with a prior"
+        return status
+
     def summary(self) -> str:
         """A one-screen table: parameter, initial, fitted, 95 % interval, the jackknife's
         95 % interval (after a cross-validation), status (identified, held, at bound, poorly
@@ -213,20 +234,7 @@ class FitResult:
         for est in self.estimates.values():
             if not est.free:
                 continue
-            if not self.success:
-                status = "not assessed (fit failed)"
-            elif est.open_ended:
-                status = f"not bounded {est.open_ended} by the data (on the box)"
-            elif est.at_bound:
-                status = "at bound (the box fixes it)"
-            elif est.identified:
-                status = "identified"
-            elif est.name in self.not_identified:
-                status = "NOT identified (held)"
-            else:
-                status = f"poorly determined (relative std {est.relative_std:.0%})"
-            if est.name in self.prior_names:
-                status += ", with a prior"
+            status = self.status_of(est.name)
             if jackknife:
                 ci = est.jackknife_ci95
                 extra = f" [{ci[0]:>10.5g}, {ci[1]:>10.5g}]" if ci else f" {'n/a':>25}"
