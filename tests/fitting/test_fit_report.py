@@ -242,3 +242,17 @@ def test_the_misfit_is_measured_against_the_sensors_not_the_estimated_levels(mis
     assert not strict.success
     assert "x the sensors' noise" in strict.message
     assert "FitOptions.max_misfit / --max-misfit" in strict.message
+
+
+def test_a_parameters_status_reads_the_same_in_the_summary_and_the_report(mismatched):
+    """The verdict on each free parameter is worded once (``FitResult.status_of``)."""
+    from hframe_id.fitting.report_tables import parameter_table
+
+    result, _ = mismatched
+    summary = result.summary()
+    rows = parameter_table(result, None, "none", None)
+    for name in result.free_names:
+        status = result.status_of(name)
+        assert status in summary
+        line = next(row for row in rows if row.startswith(f"| {result.estimates[name].key}"))
+        assert line.split("|")[6].strip() == status
