@@ -43,6 +43,7 @@ from hframe_id.fitting.report_figures import (
 from hframe_id.fitting.report_tables import (
     correlation_lines,
     cross_validation_lines,
+    information_lines,
     markdown_table,
     not_identified_lines,
     parameter_table,
@@ -355,6 +356,7 @@ def _report_lines(
         "",
         *([held, ""] if held else []),
         *not_identified_lines(result),
+        *information_lines(result),
     ]
     if cross_validation is not None:
         lines += cross_validation_lines(result, cross_validation)

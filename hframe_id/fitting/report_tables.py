@@ -220,3 +220,25 @@ def jackknife_sentence(result: FitResult, table: LeaveOneOutTable) -> list[str]:
         "intervals say; read the jackknife interval of the parameter table as theirs.",
         "",
     ]
+
+
+def information_lines(result: FitResult) -> list[str]:
+    """Which recordings carry each free parameter's information (``Statistics
+    .information_share``, in %): a parameter that only one recording determines depends on
+    that experiment; one that none determines needs another (``hframe-id design``)."""
+    shares = result.statistics.information_share if result.statistics else {}
+    if not shares or len(result.experiment_names) < 2:
+        return []
+    recordings = list(next(iter(shares.values())))
+    rows = [("parameter", *recordings)]
+    for name, share in shares.items():
+        rows.append((result.estimates[name].key, *(f"{100 * share[r]:.0f} %" for r in recordings)))
+    return [
+        "## Where each parameter's information comes from",
+        "",
+        "Share of each free parameter's Gauss-Newton information (its diagonal of J^T J) that "
+        "each recording carries; marginal, correlations with the other parameters not removed.",
+        "",
+        *markdown_table(rows),
+        "",
+    ]

@@ -74,6 +74,9 @@ class Statistics:
     bandwidths: dict[str, int]
     n_residuals: int
     method: str
+    #: per free parameter, per experiment: the share of the parameter's Gauss-Newton
+    #: information (its diagonal entry of J^T J) that the experiment's rows carry
+    information_share: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def z_value(self, confidence: float) -> float:
         """Two-sided normal quantile of ``confidence`` (1.96 for 95 %)."""
@@ -252,4 +255,31 @@ def compute_statistics(
         bandwidths=bandwidths,
         n_residuals=n,
         method=method,
+        information_share=information_shares(jac, blocks, n_nuisance, names),
     )
+
+
+def information_shares(
+    jac: np.ndarray, blocks: list[Block], n_nuisance: int, names: tuple[str, ...]
+) -> dict[str, dict[str, float]]:
+    """Per free parameter, the share [0-1] of its Gauss-Newton information, sum of squares of
+    its column of ``jac`` (weighted residuals per log-parameter), carried by each
+    experiment's rows (``blocks`` labelled "experiment:channel"; priors left out): which
+    recordings determine it, and which add nothing (marginal: correlations with the other
+    parameters are not removed)."""
+    squares = np.nan_to_num(jac[:, n_nuisance:], nan=0.0, posinf=0.0, neginf=0.0) ** 2
+    by_experiment: dict[str, np.ndarray] = {}
+    for block in blocks:
+        experiment, _ = block.label.rsplit(":", 1)
+        if experiment == "prior":
+            continue
+        total = by_experiment.setdefault(experiment, np.zeros(len(names)))
+        total += squares[block.rows].sum(axis=0)
+    whole = sum(by_experiment.values(), np.zeros(len(names)))
+    return {
+        name: {
+            experiment: float(part[k] / whole[k]) if whole[k] > 0 else 0.0
+            for experiment, part in by_experiment.items()
+        }
+        for k, name in enumerate(names)
+    }

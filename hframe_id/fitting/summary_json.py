@@ -25,6 +25,8 @@ bound on the other side only (``fitting.open_ended``; its interval's open end is
 null.
 A fit of several recordings that was cross-validated adds ``interval_95_jackknife`` (the
 experiment-level jackknife's, ``fitting.jackknife``) to each free parameter it moved.
+``information_share`` (each free parameter the statistics assessed): per recording, the
+share [0-1] of the parameter's Gauss-Newton information that recording carries.
 """
 
 from __future__ import annotations
@@ -61,6 +63,11 @@ def fit_summary(
         }
         if est.jackknife_ci95:
             parameters[name]["interval_95_jackknife"] = [_number(v) for v in est.jackknife_ci95]
+        shares = result.statistics.information_share if result.statistics else {}
+        if name in shares:
+            parameters[name]["information_share"] = {
+                recording: _number(share) for recording, share in shares[name].items()
+            }
     units = {s.name: s.unit for s in result.problem.model.outputs} if result.problem else {}
     rms = result.diagnostics.get("channel_rms", {})
     std = result.diagnostics.get("channel_std", {})
