@@ -15,7 +15,7 @@ import sys
 
 #: Section modules under bench; each has ``run()`` that prints its results (the
 #: fitting and batch sections take the keyword options built from the flags in ``main``).
-SECTIONS: tuple[str, ...] = ("cli", "simulation", "logging", "fitting", "batch")
+SECTIONS: tuple[str, ...] = ("cli", "simulation", "logging", "fitting", "batch", "design")
 
 
 def _count(minimum: int):

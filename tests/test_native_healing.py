@@ -119,8 +119,17 @@ def test_ctrl_c_during_a_compile_kills_the_compilers_group(tmp_path):
     body = f'sleep 60 &\necho "$$ $!" > {started}.tmp; mv {started}.tmp {started}\nwait'
     env = {**os.environ, "CC": str(_fake_compiler(tmp_path, body))}
     env["HFRAME_ID_CACHE"] = str(tmp_path / "cache")
+    # A child inherits its parent's ignored and blocked signals (a test worker's may differ
+    # from a terminal's): it takes Ctrl-C as a command run from a terminal does.
+    catch_interrupts = (
+        "import signal\nsignal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+    )
     process = subprocess.Popen(
-        [sys.executable, "-c", COMPILE], env=env, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-c", catch_interrupts + COMPILE],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         deadline = time.monotonic() + 60
