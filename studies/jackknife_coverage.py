@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.jackknife import add_jackknife_intervals
+from hframe_id.fitting.jackknife import with_jackknife_intervals
 from hframe_id.parameters import load_parameter_file
 from hframe_id.validation.cross_validation import leave_one_out
 from studies.mismatch import TABLE_4_2, coverage_of_mean, plant_for, training_recordings
@@ -33,7 +33,7 @@ def run_seed(noise_seed: int) -> tuple[dict, dict, bool]:
     options = FitOptions()
     result = fit_recordings(recordings, initial, options)
     table = leave_one_out(recordings, initial, options)
-    add_jackknife_intervals(result, table)
+    result = with_jackknife_intervals(result, table)
     own, jackknife = {}, {}
     for name, est in result.estimates.items():
         if est.jackknife_ci95 is not None:

@@ -549,9 +549,9 @@ def run(args: argparse.Namespace) -> int:
         if result.success and len(recordings) > 1 and not args.no_cross_validation:
             cross_validation = _cross_validate(recordings, initial, options, args.quiet)
             if cross_validation is not None:
-                from hframe_id.fitting.jackknife import add_jackknife_intervals
+                from hframe_id.fitting.jackknife import with_jackknife_intervals
 
-                add_jackknife_intervals(result, cross_validation)
+                result = with_jackknife_intervals(result, cross_validation)
         fit_id, parameter_file, report = _write_outputs(
             result, recordings, paths, initial_path, out_dir, cross_validation, drawer
         )

@@ -39,18 +39,20 @@ def jackknife_interval(
     return spread(value, theta_std, signed, 1.0, t)[2]
 
 
-def add_jackknife_intervals(result: FitResult, table: LeaveOneOutTable) -> None:
-    """Give each free parameter the fit determined (not held, not at a bound) its jackknife
-    std and interval (``ParameterEstimate.jackknife_ci95``), in place; nothing unless every
-    fold converged (a jackknife over the folds that did is not the delete-one jackknife of
-    the estimate from all recordings) and there are two or more."""
+def with_jackknife_intervals(result: FitResult, table: LeaveOneOutTable) -> FitResult:
+    """``result`` with each free parameter the fit determined (not held, not at a bound)
+    given its jackknife std and interval (``ParameterEstimate.jackknife_ci95``): a new
+    result, ``result`` unchanged. Nothing is added unless every fold converged (a jackknife
+    over the folds that did is not the delete-one jackknife of the estimate from all
+    recordings) and there are two or more."""
     if len(table.folds) < 2 or not all(fold.success for fold in table.folds):
-        return
+        return result
     problem = result.problem
     signed = dict(zip(problem.free_names, problem.linear.tolist(), strict=True))
     confidence = result.options.confidence
+    estimates = dict(result.estimates)
     for row in table.spread:
-        est = result.estimates.get(row.name)
+        est = estimates.get(row.name)
         if est is None or not est.free or est.at_bound or row.name in result.not_identified:
             continue
         if not math.isfinite(row.jackknife_std):
@@ -58,6 +60,5 @@ def add_jackknife_intervals(result: FitResult, table: LeaveOneOutTable) -> None:
         interval = jackknife_interval(
             est.estimate, row.jackknife_std, len(table.folds), signed[row.name], confidence
         )
-        result.estimates[row.name] = replace(
-            est, jackknife_std=row.jackknife_std, jackknife_ci95=interval
-        )
+        estimates[row.name] = replace(est, jackknife_std=row.jackknife_std, jackknife_ci95=interval)
+    return replace(result, estimates=estimates)
