@@ -81,7 +81,7 @@ def fit_recordings(
     # simulation drifts) has no such criterion to compare by.
     if options.continuity == "exact":
         result = _never_worse_than_known(recordings, initial, options, result)
-    result.wall_time_s = time.perf_counter() - start
+    result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
 
 
@@ -268,8 +268,10 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
         again.diagnostics["known_points"] = report
         again.diagnostics["known_points_criterion"] = criterion.name
         why = "failed" if not result.success else "ended worse"
-        again.message += f"; continued from {best.label}, where the first fit {why}"
-        return again
+        return replace(
+            again,
+            message=f"{again.message}; continued from {best.label}, where the first fit {why}",
+        )
     result.diagnostics["known_points"] = report
     if not result.success:
         ended = "failed too" if not again.success else f"ended worse than it ({continued:.6g})"

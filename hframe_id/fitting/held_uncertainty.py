@@ -18,9 +18,9 @@ from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton
 
 
-def include_held_uncertainty(problem, recordings, state, result) -> None:
-    """Widens the free parameters' intervals by the consider covariance of the held ones
-    (``FitOptions.consider``), and records what the intervals assume."""
+def include_held_uncertainty(problem, recordings, state, result):
+    """``result`` with the free parameters' intervals widened by the consider covariance of
+    the held ones (``FitOptions.consider``), and a record of what the intervals assume."""
     options = problem.options
     names = problem.model.parameter_names
     prior = consider_priors(problem.model, options.consider)
@@ -30,7 +30,7 @@ def include_held_uncertainty(problem, recordings, state, result) -> None:
     held = [n for n in names if n in prior and n not in result.free_names and p[names.index(n)]]
     result.diagnostics["consider"] = {"held_relative_std": {n: prior[n] for n in held}}
     if not held or not result.free_names:
-        return
+        return result
     if options.consider_method == "refit":
         variances, failed = _refit_consider_variances(problem, recordings, state, held, prior)
         result.diagnostics["consider"]["failed_refits"] = failed
@@ -39,6 +39,7 @@ def include_held_uncertainty(problem, recordings, state, result) -> None:
         variances = _linear_consider_variances(problem, recordings, state, result, held, prior)
     z = result.statistics.z_value(options.confidence)
     extra = {}
+    estimates = dict(result.estimates)
     for name in result.free_names:
         est = result.estimates[name]
         f = problem.free_names.index(name)
@@ -49,9 +50,10 @@ def include_held_uncertainty(problem, recordings, state, result) -> None:
         if est.at_bound:
             ci95 = ended_at_bound(problem, state, f, ci95)
         extra[name] = math.sqrt(variance)
-        result.estimates[name] = replace(est, relative_std=rel, std_error=std, ci95=ci95)
+        estimates[name] = replace(est, relative_std=rel, std_error=std, ci95=ci95)
     result.diagnostics["consider"]["relative_std_added"] = extra
     result.diagnostics["consider"]["method"] = options.consider_method
+    return replace(result, estimates=estimates)
 
 
 def _linear_consider_variances(problem, recordings, state, result, held, prior) -> dict:

@@ -169,8 +169,8 @@ def fit_in_box(
         problem, sensor_std, result.diagnostics["channel_rms"], rounds, settling
     )
     result = _misfit_judged(result, ms, state, sensor_std, estimated=bool(rounds))
-    include_held_uncertainty(problem, recordings, state, result)
-    result.wall_time_s = time.perf_counter() - start
+    result = include_held_uncertainty(problem, recordings, state, result)
+    result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
 
 

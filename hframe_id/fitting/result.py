@@ -58,9 +58,11 @@ class ParameterEstimate:
         return f"{self.name} [{self.unit}]"
 
 
-@dataclass
+@dataclass(frozen=True)
 class FitResult:
-    """What a fit produced. ``parameters`` holds every parameter (fitted and fixed)."""
+    """What a fit produced. ``parameters`` holds every parameter (fitted and fixed).
+    Frozen: what changes it (intervals widened, a continuation, the jackknife) makes a new
+    one (``dataclasses.replace``)."""
 
     success: bool
     message: str

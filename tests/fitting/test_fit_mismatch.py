@@ -98,13 +98,17 @@ def test_held_parameters_and_their_prior_are_stated():
     """A fit with held table values says which, at what value and with what prior."""
     from hframe_id.fitting.result import FitResult
 
-    result = FitResult.__new__(FitResult)
-    result.diagnostics = {"consider": {"held_relative_std": {"J_2": 0.2}}}
-    result.parameters = load_parameter_file(MODELS / "one-axis-table2.3.yaml")
-    statement = result.held_statement()
+    def held(prior: dict) -> FitResult:
+        result = FitResult.__new__(FitResult)
+        object.__setattr__(result, "diagnostics", {"consider": {"held_relative_std": prior}})
+        object.__setattr__(
+            result, "parameters", load_parameter_file(MODELS / "one-axis-table2.3.yaml")
+        )
+        return result
+
+    statement = held({"J_2": 0.2}).held_statement()
     assert "J_2 = 6.3e-05 (+/-20 %)" in statement and "consider covariance" in statement
-    result.diagnostics = {"consider": {"held_relative_std": {}}}
-    assert result.held_statement() is None
+    assert held({}).held_statement() is None
 
 
 def test_refit_consider_agrees_with_the_linear_one_where_the_effect_is_linear():

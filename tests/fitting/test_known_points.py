@@ -1,5 +1,7 @@
 """Never worse than a point the fit knows (issue 25, item 2), and the box it searches."""
 
+from dataclasses import replace
+
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
@@ -38,7 +40,9 @@ def _stopping_early(monkeypatch, table, outcome):
         calls.append(initial)
         result = real(recordings, initial, options)
         if len(calls) == 1:
-            result.parameters = table.replace_values(**{n: table.values[n] for n in FREE})
+            result = replace(
+                result, parameters=table.replace_values(**{n: table.values[n] for n in FREE})
+            )
         else:
             result = outcome(result)
         return result
@@ -60,8 +64,7 @@ def test_a_fit_worse_than_a_known_point_continues_from_it(monkeypatch, table, tr
 
 def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps):
     def still_at_the_start(result):
-        result.parameters = table
-        return result
+        return replace(result, parameters=table)
 
     _stopping_early(monkeypatch, table, still_at_the_start)
     result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
