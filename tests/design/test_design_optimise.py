@@ -24,32 +24,20 @@ from hframe_id.design.optimise import (
     relative_spread,
 )
 from hframe_id.errors import OptionError
-from hframe_id.models import build_model
 from hframe_id.recordings.sensors import SensorModel
 from hframe_id.rig.protocols import load_sequence_csv
-from hframe_id.simulation.open_loop import simulate
+from studies.design_check import simulated_positions
 
 #: Integrators differ by ~1e-6 m in x and y (docs: 20 vs 80 substeps, 1.7e-5 rad at the
 #: motors, times the pulley radius 0.0194 m); 1e-5 m is ten times that.
 POSITION_TOLERANCE_M = 1e-5
 
 
-def positions(params, table):
-    """(N, 2) x and y [m] of ``table`` through the DAC, by the simulator (not the design's
-    own transcription)."""
-    model = build_model(params.variant)
-    p = model.parameter_vector(params.values)
-    states = simulate(model, p, SensorModel().dac(table), 1e-3)[:-1]
-    outputs = np.array(model.output.map(states.shape[0])(states.T)).T
-    names = [s.name for s in model.outputs]
-    return outputs[:, [names.index("x"), names.index("y")]]
-
-
 def test_design_respects_the_voltage_and_its_travel_on_the_model(table, design):
     from tests.design.conftest import LIMITS
 
     assert np.max(np.abs(design.table)) <= LIMITS.max_voltage_v
-    xy = positions(table, design.table)
+    xy = simulated_positions(table, design.table)
     inner = 0.2 - LIMITS.margin_m
     assert np.max(np.abs(xy)) <= inner + POSITION_TOLERANCE_M
 
@@ -59,7 +47,7 @@ def test_tight_travel_is_kept_where_unconstrained_doublets_would_break_it(table)
     (measured), so the limit binds; the design stays inside on the model at every set."""
     limits = Limits(6.0, {"x": (-0.04, 0.04), "y": (-0.04, 0.04)}, 0.01)
     design = design_experiment(table, 1.0, limits, DesignOptions(draws=0))
-    xy = positions(table, design.table)
+    xy = simulated_positions(table, design.table)
     assert np.max(np.abs(xy)) <= 0.03 + POSITION_TOLERANCE_M
     for reach in design.reach:
         assert limits.overshoot(reach) <= 0

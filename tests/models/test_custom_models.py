@@ -12,12 +12,12 @@ import pandas as pd
 import pytest
 
 from hframe_id.cli import main
-from hframe_id.errors import ModelError
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.models import build_model, load_model_file
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import simulate
+from tests.models.refusals import refused_model_file
 
 #: A fourth variant: a cart on a spring, driven through a voltage-controlled force, with an
 #: offset force (a signed parameter) and viscous plus Coulomb friction.
@@ -227,13 +227,7 @@ def test_a_parameter_file_names_its_model_file(spring_cart):
 )
 def test_bad_model_files_fail_with_one_line(tmp_path, capsys, text, message):
     path = _write(tmp_path, text.replace("spring-cart-test", f"bad-{tmp_path.name[-6:]}"), "bad.py")
-    with pytest.raises(ModelError) as err:
-        load_model_file(path)
-    assert message in str(err.value)
-    assert str(path) in str(err.value) and "\n" not in str(err.value)
-    assert main(["models", "--model-file", str(path)]) == 2
-    error = capsys.readouterr().err
-    assert error.count("\n") == 1 and message in error
+    refused_model_file(path, message, capsys)
 
 
 def test_a_missing_model_file_is_one_line(capsys):
