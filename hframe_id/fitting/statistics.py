@@ -270,7 +270,7 @@ def information_shares(
     squares = np.nan_to_num(jac[:, n_nuisance:], nan=0.0, posinf=0.0, neginf=0.0) ** 2
     by_experiment: dict[str, np.ndarray] = {}
     for block in blocks:
-        experiment, _ = block.label.rsplit(":", 1)
+        experiment = block.label.rsplit(":", 1)[0]  # "experiment:channel", or one name
         if experiment == "prior":
             continue
         total = by_experiment.setdefault(experiment, np.zeros(len(names)))
