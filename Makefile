@@ -29,12 +29,12 @@ test-all: $(STAMP)
 	$(PYTEST)
 
 lint: $(STAMP)
-	$(BIN)/ruff check hframe_id bench studies tests
-	$(BIN)/ruff format --check hframe_id bench studies tests
+	$(BIN)/ruff check hframe_id bench studies tests examples
+	$(BIN)/ruff format --check hframe_id bench studies tests examples
 
 format: $(STAMP)
-	$(BIN)/ruff format hframe_id bench studies tests
-	$(BIN)/ruff check --fix hframe_id bench studies tests
+	$(BIN)/ruff format hframe_id bench studies tests examples
+	$(BIN)/ruff check --fix hframe_id bench studies tests examples
 
 fit: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/hframe-id fit $(DATA) $(FIT_ARGS)
