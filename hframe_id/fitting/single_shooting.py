@@ -39,7 +39,6 @@ class SingleShooting:
         self.active = state.active.copy()
         self._linearisation = GaussNewton(ms)
         self._last: tuple[bytes, Evaluation, np.ndarray] | None = None
-        self.evaluations = 0
 
     def start(self) -> np.ndarray:
         """z at the stage's start."""
@@ -77,7 +76,6 @@ class SingleShooting:
             ev = self.ms.evaluate(nodes, theta, self.smoothing)
             jac, residual, _ = self._linearisation.condensed_jacobian(ev, nodes, self.active)
             self._last = (key, residual, jac)
-            self.evaluations += 1
         return self._last[1], self._last[2]
 
     def residual(self, z: np.ndarray) -> np.ndarray:
