@@ -11,7 +11,13 @@ import argparse
 from pathlib import Path
 
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import add_force_option, check_file, check_length, written_together
+from hframe_id.cli.outputs import (
+    add_force_option,
+    check_file,
+    check_length,
+    output_file,
+    written_together,
+)
 from hframe_id.errors import OptionError, shown
 
 
@@ -78,7 +84,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         parser, "--draws", int, at_least=0, default=2, help="parameter sets drawn (default 2)"
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="seed of the draws (0)")
-    parser.add_argument("--out", type=Path, required=True, help="design to write (.csv)")
+    parser.add_argument(
+        "--out", type=output_file("--out"), required=True, help="design to write (.csv)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_force_option(parser)
     parser.set_defaults(handler=run)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from hframe_id.cli.json_output import emit
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import add_force_option, check_file, check_length
+from hframe_id.cli.outputs import add_force_option, check_file, check_length, output_file
 from hframe_id.errors import OptionError
 
 
@@ -100,7 +100,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="step/pulse/multisine: 0 V recorded before the excitation [s] (0.05)",
     )
     out = parser.add_argument_group("output")
-    out.add_argument("--out", type=Path, required=True, help="recording to write (.mcap)")
+    out.add_argument(
+        "--out", type=output_file("--out"), required=True, help="recording to write (.mcap)"
+    )
     add_force_option(out, "--overwrite")
     out.add_argument("--operator", help="who runs the experiment (default: login name)")
     out.add_argument("--notes", default="", help="free text for the experiment metadata")

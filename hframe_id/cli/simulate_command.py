@@ -22,6 +22,7 @@ from hframe_id.cli.outputs import (
     check_dir,
     check_file,
     check_length,
+    output_file,
     written_together,
 )
 from hframe_id.cli.progress import Progress, add_quiet_option
@@ -90,10 +91,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_number(
         parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
     )
-    parser.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    parser.add_argument("--out", type=output_file("--out"), required=True, help="CSV file to write")
     parser.add_argument(
         "--mcap",
-        type=Path,
+        type=output_file("--mcap"),
         help="also record the same inputs with the sim rig (sensor models) to this MCAP file",
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="--mcap: sensor noise seed (0)")
