@@ -21,6 +21,7 @@ from hframe_id.errors import MAX_SHOWN
 ROOT = Path(__file__).resolve().parents[2]
 H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
 REC = ROOT / "datasets" / "4V_xmotion.mcap"
+PLANT = ROOT / "datasets" / "realistic" / "plants" / "hframe-realistic.yaml"
 SAMPLE_TOPIC = "/rig/sample"
 
 
@@ -187,3 +188,21 @@ def test_a_number_beyond_any_float(work, capsys):
     path = _recording(work / "big.mcap", lambda i, m: {**m, "u1_V": 10**400} if i == 2 else m)
     line = refused(["inspect", path], capsys, path, "sample 2: u1_V must be a number")
     assert "..." in line
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["params", "show", "{p}"], ["linearize", "{p}"], ["simulate", "--plant", "{p}"]],
+    ids=["params-show", "linearize", "plant"],
+)
+def test_an_integer_beyond_any_float_in_yaml(work, capsys, argv):
+    """1 and 400 zeros: refused by the loader with its line, not an OverflowError where a
+    value is turned into a float."""
+    source = PLANT if argv[0] == "simulate" else H8
+    path = work / "big.yaml"
+    path.write_text(source.read_text().replace(": 0.0194", ": 1" + "0" * 400))
+    argv = [word.replace("{p}", str(path)) for word in argv]
+    if argv[0] == "simulate":
+        argv += ["--step", "1,4", "--duration", "0.05", "--out", "s.csv"]
+    refused(argv, capsys, path, "integer of 401 digits", "line ")
+    assert _listing(work) == {"big.yaml"}
