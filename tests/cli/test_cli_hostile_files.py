@@ -6,6 +6,7 @@ the file (and the field or line), exit status 2, no traceback, nothing written."
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -30,9 +31,11 @@ def _parameter_file(path: Path, edit: Callable[[str], str]) -> Path:
     return path
 
 
-def _recording(path: Path, payload: Callable[[int, dict], bytes | dict]) -> Path:
+def _recording(
+    path: Path, payload: Callable[[int, dict], bytes | dict], rig: dict | None = None
+) -> Path:
     """4V_xmotion.mcap with each sample message ``i`` replaced by ``payload(i, message)``
-    (bytes as they are, a dict as JSON)."""
+    (bytes as they are, a dict as JSON) and the ``rig`` metadata updated with ``rig``."""
     with REC.open("rb") as source, path.open("wb") as out:
         reader = make_reader(source)
         summary = reader.get_summary()
@@ -49,7 +52,8 @@ def _recording(path: Path, payload: Callable[[int, dict], bytes | dict]) -> Path
             for i, c in summary.channels.items()
         }
         for record in reader.iter_metadata():
-            writer.add_metadata(record.name, record.metadata)
+            changes = rig if record.name == "rig" and rig else {}
+            writer.add_metadata(record.name, {**record.metadata, **changes})
         for attachment in reader.iter_attachments():
             writer.add_attachment(
                 attachment.log_time,
@@ -206,3 +210,25 @@ def test_an_integer_beyond_any_float_in_yaml(work, capsys, argv):
         argv += ["--step", "1,4", "--duration", "0.05", "--out", "s.csv"]
     refused(argv, capsys, path, "integer of 401 digits", "line ")
     assert _listing(work) == {"big.yaml"}
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "problem"),
+    [
+        ("encoder_counts_per_rev", "0", "must be a number >= 1, got 0"),
+        ("laser_noise_std_m", "nan", "must be a number >= 0, got nan"),
+        ("dac_min_v", "20", "must be a number below rig.dac_max_v"),
+    ],
+)
+def test_rig_metadata_out_of_range(work, capsys, key, value, problem):
+    """A recording's numeric rig metadata are range-checked when it is read (0 counts per
+    revolution was a ZeroDivisionError traceback in the fitter)."""
+    path = _recording(work / "rig.mcap", lambda i, m: m, rig={key: value})
+    refused(["fit", path, "--out-dir", "fits"], capsys, path, f"rig.{key}", problem)
+    assert _listing(work) == {"rig.mcap"}
+
+
+def test_a_named_pipe_without_writer_is_not_waited_on(work, capsys):
+    """A FIFO given as a parameter file used to block the command forever."""
+    os.mkfifo(work / "pipe.yaml")
+    refused(["params", "show", work / "pipe.yaml"], capsys, "pipe.yaml")
