@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hframe_id.cli.numbers import add_number
+from hframe_id.cli.numbers import MAX_SUBSTEPS, add_number
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
@@ -118,7 +118,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--friction", metavar="{smooth,stick-slip,sign}", default="smooth")
     add_number(
-        parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
+        parser,
+        "--substeps",
+        int,
+        at_least=1,
+        at_most=MAX_SUBSTEPS,
+        help="RK4 substeps per sample (default: auto)",
     )
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")

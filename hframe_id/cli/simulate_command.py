@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.numbers import add_number
+from hframe_id.cli.numbers import MAX_SUBSTEPS, add_number
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
@@ -89,7 +89,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "its own",
     )
     add_number(
-        parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
+        parser,
+        "--substeps",
+        int,
+        at_least=1,
+        at_most=MAX_SUBSTEPS,
+        help="RK4 substeps per sample (default: auto)",
     )
     parser.add_argument("--out", type=output_file("--out"), required=True, help="CSV file to write")
     parser.add_argument(

@@ -29,6 +29,8 @@ def work(tmp_path, monkeypatch) -> Path:
         (["--protocol", "pulse", "--amplitude", "1", "--width", "0"], "--width", "0"),
         (["--protocol", "multisine", "--rms", "-1"], "--rms", "-1"),
         (["--protocol", "multisine", "--rms", "nan"], "--rms", "nan"),
+        (["--protocol", "multisine", "--band", "0.5", "5000"], "--band", "Nyquist frequency 500"),
+        (["--protocol", "multisine", "--duration", "0.1"], "--duration", "one --period 2 s"),
     ],
 )
 def test_record_option_out_of_range(work, capsys, extra, option, value):
@@ -153,3 +155,23 @@ def test_numeric_option_out_of_range_of_fit_control_fleet_batch(work, capsys, ar
 def test_control_workspace_must_be_finite(work, capsys):
     argv = [*CONTROL, "--kp", "1", "--workspace", "-0.1", "inf", "-0.1", "0.1"]
     refused(argv, capsys, "--workspace", "inf")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--params", H8, "--step", "1,4", "--duration", "0.05", "--out", "s.csv"],
+        ["control", "--params", H8, "--kp", "150", "--csv", "c.csv"],
+    ],
+    ids=["simulate", "control"],
+)
+def test_substeps_bounded_above(work, capsys, argv):
+    """--substeps 100000000 on 50 samples ran for minutes."""
+    refused([*argv, "--substeps", "100000000"], capsys, "--substeps", "<= 10000")
+    assert list(work.iterdir()) == []
+
+
+def test_fit_empty_free_list(work, capsys):
+    """--free '' fitted the default free set as if no --free were given."""
+    refused(["fit", REC, "--out-dir", "fits", "--free", ""], capsys, "free")
+    assert list(work.iterdir()) == []
