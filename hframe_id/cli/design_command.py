@@ -20,6 +20,10 @@ from hframe_id.cli.outputs import (
 )
 from hframe_id.errors import OptionError, shown
 
+#: Most parameter sets drawn: a 4 s design with 2 draws takes about 14 s (docs/design.md),
+#: so 100 is the better part of an hour; 100 000 ran for days.
+MAX_DRAWS = 100
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Register the ``design`` subcommand."""
@@ -81,7 +85,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "predicted for them (model error) scale every prediction",
     )
     add_number(
-        parser, "--draws", int, at_least=0, default=2, help="parameter sets drawn (default 2)"
+        parser,
+        "--draws",
+        int,
+        at_least=0,
+        at_most=MAX_DRAWS,
+        default=2,
+        help=f"parameter sets drawn (default 2, at most {MAX_DRAWS}; each costs about a "
+        "prediction at the file's values)",
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="seed of the draws (0)")
     parser.add_argument(

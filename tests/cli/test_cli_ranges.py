@@ -79,9 +79,20 @@ def test_recording_sample_period_against_the_device_clock(work, capsys):
     assert sorted(p.name for p in work.iterdir()) == ["clock.mcap"]
 
 
-def test_validate_max_lag_longer_than_the_recording(work, capsys):
-    argv = ["validate", H8, REC, "--max-lag", "100000", "--plot", "plots"]
-    refused(argv, capsys, "--max-lag", "100000", "1000 samples")
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [
+        (["--max-lag", "100000"], "--max-lag 100000"),
+        (["--horizon", "100000"], "--window + --horizon 100010"),
+        (["--window", "995"], "--window + --horizon 1005"),
+        (["--init-samples", "5000"], "--init-samples 5000"),
+    ],
+)
+def test_validate_spans_longer_than_the_recording(work, capsys, options, named):
+    """Every option counted in samples is checked against the recording's length (the
+    horizon, window and RMSE start were accepted, and gave empty or NaN scores)."""
+    argv = ["validate", H8, REC, *options, "--plot", "plots"]
+    refused(argv, capsys, named, "1000 samples")
     assert list(work.iterdir()) == []
 
 
@@ -139,6 +150,13 @@ OUT_OF_RANGE = [
     ([*CONTROL, "--kp", "1"], "--substeps", "0"),
     ([*FLEET_MAKE, "--weeks", "2"], "--rigs", "0"),
     ([*FLEET_MAKE, "--rigs", "1"], "--weeks", "1"),
+    ([*FLEET_MAKE, "--rigs", "100000"], "--weeks", "100000"),
+    (["batch", "m.yaml", "--results", "r.parquet"], "--workers", "100000"),
+    (
+        ["design", "--params", H8, "--duration", "1", "--max-voltage", "2", "--out", "d.csv"],
+        "--draws",
+        "100000",
+    ),
     ([*FLEET_MAKE, "--rigs", "1", "--weeks", "2"], "--seed", "-1"),
     (["fleet", "report", "r.parquet"], "--threshold", "1"),
     (["batch", "m.yaml", "--results", "r.parquet"], "--workers", "0"),
