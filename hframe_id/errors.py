@@ -71,7 +71,7 @@ def shown(value: object) -> str:
 
 
 #: The most characters of an error message the command line prints (``bounded_message``).
-MAX_MESSAGE = 380
+MAX_MESSAGE = 280
 
 
 def bounded_message(err: BaseException) -> str:
