@@ -232,3 +232,14 @@ def test_a_named_pipe_without_writer_is_not_waited_on(work, capsys):
     """A FIFO given as a parameter file used to block the command forever."""
     os.mkfifo(work / "pipe.yaml")
     refused(["params", "show", work / "pipe.yaml"], capsys, "pipe.yaml")
+
+
+def test_a_huge_csv_header_is_echoed_shortened(work, capsys):
+    """The voltage CSV's header was echoed whole (a 100 000-column header: a 690 kB error
+    line); every message is now bounded, whichever value it shows."""
+    path = work / "wide.csv"
+    path.write_text("time [s]," + ",".join(f"c{i}" for i in range(100_000)) + "\n")
+    argv = ["simulate", "--params", H8, "--csv", path, "--out", "s.csv"]
+    line = refused(argv, capsys, path, "header must be")
+    assert "..." in line
+    assert _listing(work) == {"wide.csv"}
