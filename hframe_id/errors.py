@@ -74,9 +74,10 @@ def shown(value: object) -> str:
 MAX_MESSAGE = 280
 
 
-def bounded_message(err: BaseException) -> str:
-    """An error's message on one line of at most ``MAX_MESSAGE`` characters: the safety net
-    behind ``shown`` for a message that echoes a value without it (a 100 000-column CSV
-    header), so that no input can flood the terminal."""
-    text = " ".join(str(err).split())
+def bounded_message(message: object) -> str:
+    """A message (an error, a warning) on one line of at most ``MAX_MESSAGE`` characters:
+    the safety net behind ``shown`` for a message that echoes a value without it (a
+    100 000-column CSV header, a path of 300 characters), so that no input can flood the
+    terminal."""
+    text = " ".join(str(message).split())
     return text if len(text) <= MAX_MESSAGE else text[: MAX_MESSAGE - 3] + "..."

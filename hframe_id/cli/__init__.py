@@ -23,7 +23,7 @@ import warnings
 from collections.abc import Sequence
 
 from hframe_id.cli import model_files, progress, signals
-from hframe_id.errors import HframeIdError, bounded_message
+from hframe_id.errors import HframeIdError, bounded_message, shown
 
 #: The subcommands in the order ``hframe-id --help`` lists them: (name, module, one line of
 #: help). To add a command, write a module with ``register(subparsers)`` and add its line.
@@ -135,7 +135,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` for the command line: one line, without source location."""
-    print(f"hframe-id: warning: {' '.join(str(message).split())}", file=file or sys.stderr)
+    print(f"hframe-id: warning: {bounded_message(message)}", file=file or sys.stderr)
 
 
 def _detach_stdout() -> None:
@@ -182,8 +182,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as err:  # one no command handles, e.g. standard output on a full disk
         _detach_stdout()
         problem = err.strerror or str(err)
-        line = f"{err.filename}: {problem}" if err.filename else f"standard output: {problem}"
-        print(f"hframe-id: error: {line}", file=sys.stderr)
+        where = shown(str(err.filename)) if err.filename else "standard output"
+        line = f"{where}: {problem}"
+        print(f"hframe-id: error: {bounded_message(line)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as err:
         detail = f": {err}" if str(err) else " (Ctrl-C)"

@@ -247,3 +247,11 @@ def test_standard_output_on_a_full_disk_is_one_line(tmp_path):
         )
     assert done.returncode == 2
     assert done.stderr == "hframe-id: error: standard output: No space left on device\n"
+
+
+def test_a_path_too_long_for_the_file_system_is_one_line(work, capsys):
+    """A 300-character file name: the output guard's checks raise ENAMETOOLONG, which was a
+    traceback; the line shows the path shortened and the problem."""
+    name = "a" * 300
+    refused(["export", H8, "--format", "json", "--out", name], capsys, "File name too long")
+    assert sorted(_listing(work)) == ["afile"]
