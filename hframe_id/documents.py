@@ -19,9 +19,11 @@ names the file (``where``) and, for YAML, the line. The limits:
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
+import stat
 import sys
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -195,8 +197,13 @@ def load_json(data: bytes | str, where: str, error: type[HframeIdError]) -> Any:
 
 def open_input(path: Path) -> BinaryIO:
     """``path`` opened for reading in binary. A named pipe that no program writes to reads
-    as empty instead of waiting forever (opened without blocking, then read blocking)."""
+    as empty instead of waiting forever (opened without blocking, then read blocking); a
+    device is an ``OSError`` (``/dev/zero`` never ends: read whole, it used all memory)."""
     descriptor = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    mode = os.fstat(descriptor).st_mode
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        os.close(descriptor)
+        raise OSError(errno.EINVAL, "a device, not a file", str(path))
     os.set_blocking(descriptor, True)
     return open(descriptor, "rb")
 

@@ -243,3 +243,19 @@ def test_a_huge_csv_header_is_echoed_shortened(work, capsys):
     line = refused(argv, capsys, path, "header must be")
     assert "..." in line
     assert _listing(work) == {"wide.csv"}
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["inspect", "/dev/zero"],
+        ["params", "show", "/dev/zero"],
+        ["simulate", "--params", H8, "--csv", "/dev/zero", "--out", "s.csv"],
+    ],
+    ids=["recording", "parameter-file", "voltage-csv"],
+)
+def test_a_device_as_input_is_refused_before_reading(work, capsys, argv):
+    """/dev/zero never ends: a recording or voltage CSV was read whole until memory ran
+    out (a MemoryError traceback)."""
+    refused(argv, capsys, "/dev/zero", "a device, not a file")
+    assert _listing(work) == set()
