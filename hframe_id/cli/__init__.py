@@ -155,10 +155,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen subcommand and return its exit status (0 success, 1 a fit or check that failed,
     2 bad input, 130 Ctrl-C or SIGTERM, each reported in one line)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(chosen_command(argv))
     try:
         with signals.handled():
             try:
+                # Ctrl-C while the command's module is imported: one line too
+                parser = build_parser(chosen_command(argv))
                 args = parser.parse_args(argv)  # a numeric option out of range: OptionError
                 with (
                     warnings.catch_warnings(),

@@ -252,3 +252,43 @@ def test_batch_with_an_unwritable_out_dir_is_one_line_before_any_work(tmp_path, 
     argv = ["batch", _manifest(tmp_path), "--results", tmp_path / "r.parquet", "--out-dir", out]
     refused(argv, capsys, "--out-dir", out)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "manifest.yaml"]
+
+
+def test_ctrl_c_while_the_command_module_is_imported(monkeypatch, capsys):
+    """Ctrl-C in the first tenth of a second (the command's module being imported) was a
+    KeyboardInterrupt traceback: the parser is now built under the signal handling too."""
+
+    def interrupted(name):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("hframe_id.cli.importlib.import_module", interrupted)
+    assert main(["fit", "x.mcap"]) == signals.EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "hframe-id: interrupted (Ctrl-C)\n"
+
+
+def test_fit_interrupted_while_reporting_leaves_no_parameter_file(tmp_path, monkeypatch, capsys):
+    """The parameter file is written before the report: Ctrl-C during the report left it
+    behind (exit 130 with an output in place)."""
+
+    def interrupted(*args, **kwargs):
+        raise signals.Interrupted("SIGINT received")
+
+    monkeypatch.setattr("hframe_id.fitting.report.write_report", interrupted)
+    monkeypatch.chdir(tmp_path)
+    rec = ROOT / "datasets" / "4V_xmotion.mcap"
+    argv = ["fit", rec, "--quiet", "--no-plots", "--max-iterations", "1", "--out-dir", "fits"]
+    assert main([str(word) for word in argv]) == signals.EXIT_INTERRUPTED
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_figure_worker_whose_command_is_gone_ends_quietly():
+    """A worker answering after the command closed its pipe (interrupted) ended with a
+    traceback ("Process hframe-id figures:") under the command's line."""
+    import multiprocessing
+
+    from hframe_id.figure_drawers import _answer
+
+    command, worker = multiprocessing.Pipe()
+    command.send((len, ([],)))
+    command.close()
+    _answer(worker)  # the answer finds the pipe closed: returns, raises nothing
