@@ -292,3 +292,28 @@ def test_a_figure_worker_whose_command_is_gone_ends_quietly():
     command.send((len, ([],)))
     command.close()
     _answer(worker)  # the answer finds the pipe closed: returns, raises nothing
+
+
+def test_a_long_import_says_so_unless_quiet(tmp_path, capsys, monkeypatch):
+    """A log of millions of rows took 50 s to import with nothing on stderr (and a Ctrl-C
+    during its CSV parsing took 7 s to act: parsed row by row now)."""
+    from hframe_id.recordings import importer
+
+    imported = importer.import_recording
+
+    def slow(*args, **kwargs):
+        time.sleep(0.5)  # past the announcement below, whatever the machine's load
+        return imported(*args, **kwargs)
+
+    monkeypatch.setattr(importer, "import_recording", slow)
+    monkeypatch.setattr(progress, "ANNOUNCE_AFTER_S", 0.05)
+    log = tmp_path / "log.csv"
+    log.write_text("t,u,x\n" + "".join(f"{k * 0.001},1,0\n" for k in range(10)))
+    argv = ["import", str(log), "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
+    argv += ["--variant", "a", "--out", str(tmp_path / "log.mcap")]
+    assert main(argv) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == f"importing {log} ..."
+    assert lines[1].startswith(f"importing {log}: done in ")
+    assert main([*argv, "--force", "--quiet"]) == 0
+    assert "importing" not in capsys.readouterr().err
