@@ -13,7 +13,9 @@ from pathlib import Path
 
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
 
-DEFAULT_PARAMS = Path("models/hframe-8-table4.2.yaml")
+#: The shipped parameter file reproduced by default (found wherever the command runs: a
+#: path relative to the working directory failed outside the checkout).
+DEFAULT_PARAMS = "hframe-8-table4.2.yaml"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -29,8 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--params",
         type=Path,
-        default=DEFAULT_PARAMS,
-        help=f"H-frame parameter file (default {DEFAULT_PARAMS}: Table 4.1 + 4.2)",
+        help=f"H-frame parameter file (default: the shipped models/{DEFAULT_PARAMS}, "
+        "Table 4.1 + 4.2)",
     )
     parser.add_argument(
         "--no-sensitivity", action="store_true", help="skip the plant-variation table"
@@ -44,8 +46,9 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.control.reproduction import report_files, reproduce, write_report
     from hframe_id.models import build_model
     from hframe_id.parameters import load_parameter_file
+    from hframe_id.resources import model_file
 
-    params = load_parameter_file(args.params)
+    params = load_parameter_file(args.params or model_file(DEFAULT_PARAMS))
     check_hframe(build_model(params.variant))
     check_dir(args.out, "--out", files=report_files(), force=args.force)
     rep = reproduce(params, sensitivity=not args.no_sensitivity)

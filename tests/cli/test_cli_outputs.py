@@ -255,3 +255,10 @@ def test_a_path_too_long_for_the_file_system_is_one_line(work, capsys):
     name = "a" * 300
     refused(["export", H8, "--format", "json", "--out", name], capsys, "File name too long")
     assert sorted(_listing(work)) == ["afile"]
+
+
+def test_reproduce_runs_outside_the_checkout(work, capsys):
+    """Its default --params was models/... relative to the working directory: outside the
+    checkout, 'no such parameter file'."""
+    assert main(["reproduce", "--no-sensitivity", "--out", "rep"]) == 0
+    assert (work / "rep" / "report.md").is_file()
