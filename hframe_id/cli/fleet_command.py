@@ -142,6 +142,8 @@ def run_report(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else results.with_name(f"{results.stem}-report")
     check_dir(out, "--out", files=(REPORT_PAGE,), folders=(REPORT_PLOTS,), force=args.force)
     frame = read_results(results)
+    if frame.empty:
+        raise OptionError(f"{results}: holds no fits; nothing to report")
     drifts = drift_table(frame, threshold)
     report = summary(frame, drifts, threshold, results, out / REPORT_PLOTS)
     with written_together() as staging:

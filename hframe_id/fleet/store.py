@@ -20,12 +20,13 @@ import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from hframe_id.atomic import replace_atomically
-from hframe_id.errors import HframeIdError
+from hframe_id.errors import HframeIdError, shown
 
 
 class StoreError(HframeIdError):
@@ -90,4 +91,38 @@ def read_results(path: str | Path) -> pd.DataFrame:
     missing = [c for c in ("key", "rig", "run_time", "status") if c not in frame.columns]
     if missing:
         raise StoreError(f"{path}: not a results file (no column {missing[0]!r})")
+    for column in frame.columns:
+        problem = _column_problem(frame, column)
+        if problem:
+            raise StoreError(f"{path}: not a results file (column {column!r} {problem})")
     return frame
+
+
+#: The values of the ``status`` column.
+STATUSES = ("ok", "failed", "error")
+
+
+def _column_problem(frame: pd.DataFrame, column: str) -> str | None:
+    """What is wrong with the values of ``column`` for its kind (the module docstring's
+    columns: text, a time with a zone, the status, a flag, a number with its unit), or None.
+    A store edited or written by another program used to give a traceback or a report of
+    nonsense."""
+    values = frame[column]
+    if column in ("key", "rig", "status"):
+        if not values.map(lambda value: isinstance(value, str)).all():
+            return "must hold text"
+        unknown = sorted(set(values) - set(STATUSES)) if column == "status" else []
+        return f"holds {shown(unknown[0])}, not one of {', '.join(STATUSES)}" if unknown else None
+    if column == "run_time":
+        zoned = isinstance(values.dtype, pd.DatetimeTZDtype)
+        return None if zoned else "must hold times with a time zone"
+    if column.endswith(" identified"):  # empty in the rows of failed fits
+        flags = values.dropna().map(lambda value: isinstance(value, bool | np.bool_)).all()
+        return None if flags else "must hold true or false"
+    if column.endswith("]"):  # NAME [UNIT], NAME std [UNIT], rms CHANNEL [UNIT], wall_time [s]
+        numbers = pd.api.types.is_numeric_dtype(values) and not pd.api.types.is_bool_dtype(values)
+        if not numbers:
+            return "must hold numbers"
+        if np.isinf(values.to_numpy(dtype=float)).any():
+            return "holds an infinite value"
+    return None

@@ -5,11 +5,13 @@ the file (and the field or line), exit status 2, no traceback, nothing written."
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import os
 from collections.abc import Callable
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
@@ -259,3 +261,47 @@ def test_a_device_as_input_is_refused_before_reading(work, capsys, argv):
     out (a MemoryError traceback)."""
     refused(argv, capsys, "/dev/zero", "a device, not a file")
     assert _listing(work) == set()
+
+
+def _results(path: Path, **columns) -> Path:
+    """A results store of two runs of one rig, with ``columns`` replacing its columns."""
+    frame = pd.DataFrame(
+        {
+            "key": ["k0", "k1"],
+            "rig": ["rig-01", "rig-01"],
+            "run_time": [dt.datetime(2026, 1, d, tzinfo=dt.UTC) for d in (5, 12)],
+            "status": ["ok", "ok"],
+            "k_l [N/m]": [13000.0, 15000.0],
+            "k_l identified": [True, True],
+            **columns,
+        }
+    )
+    frame.to_parquet(path)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("column", "values", "problem"),
+    [
+        ("rig", [5, 6], "must hold text"),
+        ("run_time", ["yesterday", "today"], "times with a time zone"),
+        ("status", ["ok", "great"], "'great', not one of ok, failed, error"),
+        ("k_l [N/m]", ["abc", "def"], "must hold numbers"),
+        ("k_l [N/m]", [1.0, float("inf")], "an infinite value"),
+        ("k_l identified", ["maybe", "yes"], "must hold true or false"),
+    ],
+)
+def test_a_results_store_with_a_column_of_the_wrong_kind(work, capsys, column, values, problem):
+    """A store edited or written by another program: a traceback (a value that is text) or a
+    report of nonsense with exit 0 (a rig that is a number, an unknown status)."""
+    path = _results(work / "r.parquet", **{column: values})
+    refused(["fleet", "report", path, "--out", "rep"], capsys, path, repr(column), problem)
+    assert _listing(work) == {"r.parquet"}
+
+
+def test_a_results_store_without_fits(work, capsys):
+    """An empty store was reported (a matplotlib warning, exit 0)."""
+    path = _results(work / "r.parquet")
+    pd.read_parquet(path).iloc[:0].to_parquet(path)
+    refused(["fleet", "report", path, "--out", "rep"], capsys, path, "holds no fits")
+    assert _listing(work) == {"r.parquet"}
