@@ -81,8 +81,10 @@ def local_cluster(workers: int) -> Iterator[LocalCluster]:
 
     The key is removed from ``distributed.nanny.pre-spawn-environ`` after ``distributed`` is
     imported (dask/distributed#8143: importing it restores removed defaults). Dask's own log
-    lines below errors are silenced (a cancelled fit's warnings are no news to the user),
-    and on Ctrl-C or SIGTERM (``KeyboardInterrupt``) the worker processes are killed at once:
+    lines are silenced up to its errors (a cancelled fit's warnings are no news to the user,
+    and a worker whose heartbeat meets the scheduler closing at the end of a batch logged a
+    CommClosedError traceback at error level: what goes wrong in a fit is its row's), and on
+    Ctrl-C or SIGTERM (``KeyboardInterrupt``) the worker processes are killed at once:
     a worker in the middle of a fit would otherwise be waited for (4 s) before the nanny
     kills it, and its files would be written meanwhile."""
     environ = dask.config.get("distributed.nanny.pre-spawn-environ", default={})
@@ -94,7 +96,7 @@ def local_cluster(workers: int) -> Iterator[LocalCluster]:
             threads_per_worker=1,
             processes=True,
             dashboard_address=":0",
-            silence_logs=logging.ERROR,
+            silence_logs=logging.CRITICAL,
         ) as cluster,
     ):
         try:
