@@ -6,6 +6,7 @@ are echoed through ``shown``, which bounds their length.
 """
 
 import reprlib
+import signal
 
 
 class HframeIdError(Exception):
@@ -45,6 +46,16 @@ class Interrupted(KeyboardInterrupt):
     """The user's Ctrl-C or a SIGTERM, as the command line's signal handler raises it
     (``hframe_id.cli.signals``): told apart from a ``KeyboardInterrupt`` that a model or
     controller file raises itself, which is that file's error."""
+
+
+def stopping_signals() -> tuple[signal.Signals, ...]:
+    """The signals that stop a command (the command line, a recording): Ctrl-C, ``kill``'s
+    default and, where it exists and is not ignored, SIGHUP (the terminal or SSH session
+    closed: it used to kill a command outright, leaving its temporaries behind; ``nohup``
+    ignores it, and then it stays ignored)."""
+    hangup = getattr(signal, "SIGHUP", None)
+    kept = hangup is not None and signal.getsignal(hangup) is not signal.SIG_IGN
+    return (signal.SIGINT, signal.SIGTERM, *((hangup,) if kept else ()))
 
 
 #: The most characters of a value an error message shows (``shown``).

@@ -1,4 +1,4 @@
-"""Ctrl-C and SIGTERM in the command line (issue 27, item 6).
+"""Ctrl-C, SIGTERM and SIGHUP in the command line (issue 27, item 6).
 
 ``handled()`` installs, for the duration of one command, a handler of SIGINT and SIGTERM
 that records the signal and raises ``Interrupted`` (a ``KeyboardInterrupt``) in the main
@@ -36,10 +36,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-from hframe_id.errors import Interrupted
-
-#: The signals that end a command: Ctrl-C and ``kill``'s default.
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+from hframe_id.errors import Interrupted, stopping_signals
 
 #: Seconds the main thread has to run the handler before the watchdog ends the process.
 GRACE_S = 0.5
@@ -89,17 +86,18 @@ def discard_on_exit(discard: Callable[[], None]) -> Iterator[None]:
         _discards.remove(discard)
 
 
-def _watch(wakeups: int) -> None:
+def _watch(wakeups: int, handled_signals: tuple[signal.Signals, ...]) -> None:
     """The watchdog: read signal numbers from the wakeup pipe until it is closed; end the
-    process if the main thread has not run the handler of a SIGINT or SIGTERM in time."""
-    ending = {int(signum) for signum in SIGNALS}
+    process if the main thread has not run the handler of one of ``handled_signals`` in
+    time."""
+    ending = {int(signum) for signum in handled_signals}
     while data := os.read(wakeups, 64):
         if not ending.intersection(data):
             continue  # another signal with a Python handler (the model-file timer's)
         time.sleep(GRACE_S)
         if _received:
             continue  # handled: the command is unwinding
-        if any(signal.getsignal(signum) is not _handle for signum in SIGNALS):
+        if any(signal.getsignal(signum) is not _handle for signum in handled_signals):
             continue  # a handler of the command's own (the recorder's clean stop)
         for discard in reversed(_discards):
             discard()
@@ -121,9 +119,13 @@ def handled() -> Iterator[None]:
     _received.clear()
     wakeups, wakeup_writer = os.pipe()
     os.set_blocking(wakeup_writer, False)
-    previous = {signum: signal.signal(signum, _handle) for signum in SIGNALS}
+    ending = stopping_signals()
+    previous = {signum: signal.signal(signum, _handle) for signum in ending}
     previous_writer = signal.set_wakeup_fd(wakeup_writer, warn_on_full_buffer=False)
-    threading.Thread(target=_watch, args=(wakeups,), name="hframe-id signals", daemon=True).start()
+    watchdog = threading.Thread(
+        target=_watch, args=(wakeups, ending), name="hframe-id signals", daemon=True
+    )
+    watchdog.start()
     try:
         yield
     finally:

@@ -25,7 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from hframe_id import __version__
-from hframe_id.errors import OptionError, RigFault
+from hframe_id.errors import OptionError, RigFault, stopping_signals
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.writer import (
     DEFAULT_CHUNK_DURATION_S,
@@ -167,10 +167,11 @@ class _StopRequest:
         self._previous: dict[int, Any] = {}
 
     def install(self) -> None:
-        """Catch SIGINT and SIGTERM as a stop request (only possible on the main thread)."""
+        """Catch SIGINT, SIGTERM and SIGHUP (``stopping_signals``) as a stop request (only
+        possible on the main thread)."""
         if threading.current_thread() is not threading.main_thread():
             return
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in stopping_signals():
             self._previous[signum] = signal.signal(signum, self._handle)
 
     def _handle(self, signum: int, frame: object) -> None:

@@ -88,8 +88,14 @@ def _assert_interrupted(code: int, err: list[str], elapsed: float, name: str) ->
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize(
+    "signum",
+    [signal.SIGTERM, signal.SIGINT, signal.SIGHUP],
+    ids=["SIGTERM", "SIGINT", "SIGHUP"],
+)
 def test_a_long_simulation_in_c_code_ends_at_once_and_writes_nothing(tmp_path, signum):
+    """SIGHUP (the terminal or SSH session closed) killed the command outright, leaving its
+    hidden temporaries; it now ends a command as Ctrl-C does (not under nohup)."""
     argv = [*LONG_CONTROL, "--csv", "run.csv", "--plot", "plots"]
     code, err, elapsed = _interrupt(argv, tmp_path, "simulating 250 s of hframe-8", signum)
     _assert_interrupted(code, err, elapsed, signal.Signals(signum).name)
