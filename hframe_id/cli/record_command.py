@@ -20,8 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run an experiment on a rig and record it (MCAP)",
         description="Run a voltage protocol on a rig and record every sample to an MCAP file "
         "(docs/log-format.md). Safety is always on: voltages are clamped to the DAC range; a "
-        "limit switch, a link fault, Ctrl-C or SIGTERM set 0 V and end the run (the file is "
-        "still finished). Exit status 0: completed; 1: aborted.",
+        "limit switch, a link fault, Ctrl-C, SIGTERM or SIGHUP set 0 V and end the run (the "
+        "file is still finished). Exit status 0: completed; 1: aborted.",
     )
     rig = parser.add_argument_group("rig")
     rig.add_argument("--rig", choices=("sim", "serial"), required=True, help="rig backend")

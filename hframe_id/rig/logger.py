@@ -3,7 +3,8 @@
 Safety, always on:
 - commanded voltages are clamped to the DAC range (a ``clamp`` event says so once);
 - a closed limit switch or a link fault sets 0 V at once, logs the event and aborts the run;
-- SIGINT (Ctrl-C) and SIGTERM set 0 V, log a ``signal`` event and finish the file properly.
+- SIGINT (Ctrl-C), SIGTERM and SIGHUP (unless ignored) set 0 V, log a ``signal`` event and
+  finish the file properly.
 
 The loop only reads a sample, looks up the protocol's voltage, commands it and queues the
 message; encoding and disk writes happen on the writer's thread (``LogWriter``).
