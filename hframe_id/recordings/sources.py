@@ -214,8 +214,9 @@ def _read_mat(path: Path) -> SourceTable:
         variables = scipy.io.loadmat(path)
     except NotImplementedError:  # scipy's answer to a v7.3 file
         raise SourceDataError(f"{path}: {_V73}") from None
-    except (ValueError, TypeError, OSError, scipy.io.matlab.MatReadError) as err:
-        raise SourceDataError(f"{path}: not a readable MATLAB .mat file ({err})") from None
+    except Exception as err:  # scipy on a corrupt file: any error (an IndexError when cut)
+        reason = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        raise SourceDataError(f"{path}: not a readable MATLAB .mat file ({reason})") from None
     raw = {k: v for k, v in variables.items() if not k.startswith("__")}
     scalars = {
         k: v.item()

@@ -305,3 +305,20 @@ def test_a_results_store_without_fits(work, capsys):
     pd.read_parquet(path).iloc[:0].to_parquet(path)
     refused(["fleet", "report", path, "--out", "rep"], capsys, path, "holds no fits")
     assert _listing(work) == {"r.parquet"}
+
+
+def test_a_mat_file_cut_in_its_header(work, capsys):
+    """scipy raises what it meets in a corrupt file (an IndexError for one cut at 100
+    bytes): a traceback; any error of the reader is now the file's one line."""
+    import io
+
+    import numpy as np
+    from scipy.io import savemat
+
+    buffer = io.BytesIO()
+    savemat(buffer, {"t": np.arange(10) * 1e-3, "u": np.ones(10), "x": np.zeros(10)})
+    path = work / "cut.mat"
+    path.write_bytes(buffer.getvalue()[:100])
+    argv = ["import", path, "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
+    refused([*argv, "--variant", "a", "--out", "cut.mcap"], capsys, path, "not a readable")
+    assert _listing(work) == {"cut.mat"}
