@@ -83,6 +83,14 @@ def _range(values) -> dict[str, float | None]:
     return {"min": float(finite.min()), "max": float(finite.max())}
 
 
+def _aborted(aborted: bool, finished: bool) -> str:
+    """The ``aborted`` line: a salvaged file without an abort event did not end with a stop
+    at all (its writer was killed), which "no" would misstate."""
+    if aborted:
+        return "yes"
+    return "no" if finished else "unknown: the run ended without a stop event (writer killed)"
+
+
 def summarize(recording: Recording, log) -> dict[str, Any]:
     """What ``inspect`` reports, as plain data (the ``--json`` object without its envelope)."""
     import numpy as np
@@ -243,7 +251,7 @@ def describe(summary: dict[str, Any]) -> list[str]:
                 if channel["first_invalid_s"] is not None:
                     line += f" (first invalid at {channel['first_invalid_s']:.3f} s)"
             lines.append(line)
-    lines.append("aborted        " + ("yes" if done["aborted"] else "no"))
+    lines.append("aborted        " + _aborted(done["aborted"], summary["finished"]))
     if summary["link"]:
         pairs = ", ".join(f"{k}={_value(v)}" for k, v in summary["link"].items())
         lines.append(f"link           {pairs}")

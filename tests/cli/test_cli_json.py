@@ -61,6 +61,8 @@ def test_inspect_states_a_salvaged_recording_and_its_lost_share(half, capsys):
     text = capsys.readouterr().out
     assert "recorded       500 of 1000 planned samples (50.0 % lost)" in text
     assert "output         x [m]:" in text and "input          u1 [V]:" in text
+    # a killed writer's file has no stop event: "aborted no" misstated it (issue 27)
+    assert "aborted        unknown: the run ended without a stop event" in text
 
 
 def test_inspect_plots_every_output_and_signal_in_its_unit(tmp_path, capsys):
