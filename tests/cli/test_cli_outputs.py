@@ -262,3 +262,20 @@ def test_reproduce_runs_outside_the_checkout(work, capsys):
     checkout, 'no such parameter file'."""
     assert main(["reproduce", "--no-sensitivity", "--out", "rep"]) == 0
     assert (work / "rep" / "report.md").is_file()
+
+
+def test_import_names_its_output_not_the_hidden_file_it_writes(work, capsys, monkeypatch):
+    """A write that fails (a full disk: 'No space left on device') named the hidden staging
+    file (.run.mcap.x1y2.tmp/run.mcap.partial) instead of the output."""
+    from hframe_id.errors import LogFormatError
+    from hframe_id.recordings import importer
+
+    def failing(path):
+        raise LogFormatError(f"{path}.partial: writing failed (No space left on device)")
+
+    monkeypatch.setattr(importer, "read_recording", failing)
+    (work / "log.csv").write_text("t,u,x\n0,1,0\n0.001,1,0\n")
+    argv = ["import", "log.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
+    line = refused([*argv, "--variant", "a", "--out", "run.mcap"], capsys, "No space left")
+    assert "hframe-id: error: run.mcap.partial: writing failed" in line
+    assert sorted(_listing(work)) == ["afile", "log.csv"]
