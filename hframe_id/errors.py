@@ -58,6 +58,13 @@ def stopping_signals() -> tuple[signal.Signals, ...]:
     return (signal.SIGINT, signal.SIGTERM, *((hangup,) if kept else ()))
 
 
+def renamed(err: HframeIdError, hidden: object, target: object) -> HframeIdError:
+    """``err`` again, its message naming ``target`` where it named ``hidden``: the hidden
+    temporary file or folder a command wrote its output through (a full disk reported as
+    '.run.mcap.x1y2.tmp/run.mcap.partial: writing failed')."""
+    return type(err)(str(err).replace(str(hidden), str(target)))
+
+
 #: The most characters of a value an error message shows (``shown``).
 MAX_SHOWN = 80
 

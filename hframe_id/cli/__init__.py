@@ -181,9 +181,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except OSError as err:  # one no command handles, e.g. standard output on a full disk
-        _detach_stdout()
         problem = err.strerror or str(err)
+        # without a file name: a stream's write, standard output's (files are written
+        # through Staging or the recording writers, which name them)
         where = shown(str(err.filename)) if err.filename else "standard output"
+        _detach_stdout()
         line = f"{where}: {problem}"
         print(f"hframe-id: error: {bounded_message(line)}", file=sys.stderr)
         return 2

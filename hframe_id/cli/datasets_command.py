@@ -14,7 +14,7 @@ from pathlib import Path
 from hframe_id.cli import signals
 from hframe_id.cli.json_output import emit
 from hframe_id.cli.outputs import check_dir, written_together
-from hframe_id.errors import LogFormatError
+from hframe_id.errors import LogFormatError, renamed
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -94,7 +94,10 @@ def run_make(args: argparse.Namespace) -> int:
     with written_together() as staging, _scratch(out) as scratch:
         if args.only and (out / MANIFEST).is_file():
             shutil.copyfile(out / MANIFEST, scratch / MANIFEST)
-        made = make_datasets(scratch, args.only, progress=report, collection=_collection(args))
+        try:
+            made = make_datasets(scratch, args.only, progress=report, collection=_collection(args))
+        except LogFormatError as err:  # a full disk, say: name --out, not the scratch folder
+            raise renamed(err, scratch, out) from None
         for path in sorted(p for p in scratch.rglob("*") if p.is_file()):
             os.replace(path, staging.file(out / path.relative_to(scratch)))
     print(f"manifest             {out / made.relative_to(scratch)}")

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from hframe_id import __version__
-from hframe_id.errors import LogFormatError, OptionError
+from hframe_id.errors import LogFormatError, OptionError, renamed
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import VALID_SUFFIX, Channels
 from hframe_id.recordings.import_spec import RIG_KEYS, ImportSpec
@@ -257,7 +257,9 @@ def _write(
         written = writer.finish()
         read_recording(written)
         os.replace(written, out)
-    except LogFormatError as err:  # named by the hidden file written: name the output
-        raise LogFormatError(str(err).replace(str(staging / out.name), str(out))) from None
+    except LogFormatError as err:
+        raise renamed(err, staging / out.name, out) from None
+    except OSError as err:  # a full disk, found when the file is closed
+        raise LogFormatError(f"{out}: cannot write ({err.strerror or err})") from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)

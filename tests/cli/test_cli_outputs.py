@@ -264,18 +264,28 @@ def test_reproduce_runs_outside_the_checkout(work, capsys):
     assert (work / "rep" / "report.md").is_file()
 
 
-def test_import_names_its_output_not_the_hidden_file_it_writes(work, capsys, monkeypatch):
-    """A write that fails (a full disk: 'No space left on device') named the hidden staging
-    file (.run.mcap.x1y2.tmp/run.mcap.partial) instead of the output."""
+@pytest.mark.parametrize(
+    ("fault", "named"),
+    [
+        ("writer", "hframe-id: error: run.mcap.partial: writing failed"),
+        ("close", "hframe-id: error: run.mcap: cannot write"),
+    ],
+)
+def test_import_on_a_full_disk_names_its_output(work, capsys, monkeypatch, fault, named):
+    """A write that fails (a full disk) named the hidden staging file
+    (.run.mcap.x1y2.tmp/run.mcap.partial) instead of the output, and one found when the
+    file was closed (an OSError without a file name) escaped the importer unnamed."""
     from hframe_id.errors import LogFormatError
     from hframe_id.recordings import importer
 
     def failing(path):
+        if fault == "close":
+            raise OSError(28, "No space left on device")
         raise LogFormatError(f"{path}.partial: writing failed (No space left on device)")
 
     monkeypatch.setattr(importer, "read_recording", failing)
     (work / "log.csv").write_text("t,u,x\n0,1,0\n0.001,1,0\n")
     argv = ["import", "log.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
     line = refused([*argv, "--variant", "a", "--out", "run.mcap"], capsys, "No space left")
-    assert "hframe-id: error: run.mcap.partial: writing failed" in line
+    assert named in line
     assert sorted(_listing(work)) == ["afile", "log.csv"]
