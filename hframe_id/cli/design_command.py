@@ -18,6 +18,7 @@ from hframe_id.cli.outputs import (
     output_file,
     written_together,
 )
+from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError, shown
 
 #: Most parameter sets drawn: a 4 s design with 2 draws takes about 14 s (docs/design.md),
@@ -100,6 +101,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_force_option(parser)
+    add_quiet_option(parser)
     parser.set_defaults(handler=run)
 
 
@@ -210,13 +212,18 @@ def _design(args, params, limits, options, calibration: tuple, paths: tuple) -> 
 
     try:
         free_parameters(params, options.free)
-        design = design_experiment(params, args.duration, limits, options)
-        factor = 1.0
-        if calibration:
-            factor = misfit_factor(
-                params, calibration, design.fit_options, options.sensors, options.sample_period_s
-            )
-        rows = predictions(design, params, limits, options, factor)
+        with Progress(args.quiet).slow(f"designing {args.duration:g} s of {params.variant}"):
+            design = design_experiment(params, args.duration, limits, options)
+            factor = 1.0
+            if calibration:
+                factor = misfit_factor(
+                    params,
+                    calibration,
+                    design.fit_options,
+                    options.sensors,
+                    options.sample_period_s,
+                )
+            rows = predictions(design, params, limits, options, factor)
     except FitError as err:
         raise OptionError(f"--params {args.params}: {err}") from None
     except FloatingPointError as err:

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.cli.progress import Progress, add_quiet_option
 
 #: The shipped parameter file reproduced by default (found wherever the command runs: a
 #: path relative to the working directory failed outside the checkout).
@@ -37,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-sensitivity", action="store_true", help="skip the plant-variation table"
     )
+    add_quiet_option(parser)
     parser.set_defaults(handler=run)
 
 
@@ -51,10 +53,11 @@ def run(args: argparse.Namespace) -> int:
     params = load_parameter_file(args.params or model_file(DEFAULT_PARAMS))
     check_hframe(build_model(params.variant))
     check_dir(args.out, "--out", files=report_files(), force=args.force)
-    rep = reproduce(params, sensitivity=not args.no_sensitivity)
     command = "hframe-id " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else ""
-    with written_together() as staging:
-        report = write_report(rep, args.out, staging, command)
+    with Progress(args.quiet).slow("reproducing the Chapter 5 tables"):
+        rep = reproduce(params, sensitivity=not args.no_sensitivity)
+        with written_together() as staging:
+            report = write_report(rep, args.out, staging, command)
     ok = rep.within_tolerance()
     print(f"wrote {report}")
     for label, flag in ok.items():

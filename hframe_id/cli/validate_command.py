@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from hframe_id.cli.fit_command import resolve_dataset
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 
 if TYPE_CHECKING:  # the validation package (NumPy, CasADi) is imported when the command runs
@@ -103,6 +104,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--plot", metavar="DIR", help="write compare and resid PNGs to DIR")
     add_force_option(parser)
+    add_quiet_option(parser)
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.set_defaults(handler=run)
 
@@ -155,7 +157,9 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         names = plot_names([r.name() for r in recordings], labels_of(parameter_sets))
         plot_dir = check_dir(args.plot, "--plot", files=names, force=args.force)
-    result = validate(parameter_sets, recordings, options)
+    what = f"validating {len(parameter_sets)} parameter file(s) on {len(recordings)} recording(s)"
+    with Progress(args.quiet).slow(what):
+        result = validate(parameter_sets, recordings, options)
     written = []
     if plot_dir is not None:
         with written_together() as staging:

@@ -347,3 +347,28 @@ def test_dask_workers_log_nothing_below_critical(monkeypatch):
     with runner.local_cluster(1):
         pass
     assert made["silence_logs"] == logging.CRITICAL
+
+
+@pytest.mark.parametrize(
+    ("argv", "announced"),
+    [
+        (["validate", H8, ROOT / "datasets" / "4V_xmotion.mcap", "--horizon", "0"], "validating"),
+        (["reproduce", "--no-sensitivity", "--out", "rep"], "reproducing the Chapter 5 tables"),
+        (
+            ["design", "--params", H8, "--duration", "0.2", "--max-voltage", "2", "--draws", "0"]
+            + ["--travel", "x=-0.2:0.2", "--travel", "y=-0.2:0.2", "--out", "d.csv"],
+            "designing 0.2 s of hframe-8",
+        ),
+    ],
+    ids=["validate", "reproduce", "design"],
+)
+def test_long_commands_say_so_unless_quiet(tmp_path, capsys, monkeypatch, argv, announced):
+    """validate (6 s on the EMPS record with its controller), design (20 s) and reproduce
+    (4 s) printed nothing while they worked, and had no --quiet."""
+    monkeypatch.setattr(progress, "ANNOUNCE_AFTER_S", 0.0)
+    monkeypatch.chdir(tmp_path)
+    argv = [str(word) for word in argv]
+    assert main(argv) == 0
+    assert capsys.readouterr().err.startswith(f"{announced}")
+    assert main([*argv, "--force", "--quiet"] if argv[0] != "validate" else [*argv, "--quiet"]) == 0
+    assert announced not in capsys.readouterr().err

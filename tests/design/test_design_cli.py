@@ -17,9 +17,10 @@ THESIS_TRAVEL = ["--travel", "x=-0.2:0.2", "--travel", "y=-0.2:0.2"]
 
 
 def argv(out, *extra, params=TABLE, volts="6", travel=THESIS_TRAVEL):
+    # --quiet: a refusal found after 2 s of work would follow the progress line
     return [
         "design", "--params", params, "--duration", "1", "--max-voltage", volts,
-        *travel, "--out", out, "--draws", "0", *extra,
+        *travel, "--out", out, "--draws", "0", "--quiet", *extra,
     ]  # fmt: skip
 
 
