@@ -25,7 +25,12 @@ import numpy as np
 
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import at_bound_clause
-from hframe_id.fitting.known_points import Criterion, known_points, reference_sets
+from hframe_id.fitting.known_points import (
+    Criterion,
+    candidate_thetas,
+    judged_starts,
+    known_points,
+)
 from hframe_id.fitting.local_fit import fit_in_box
 from hframe_id.fitting.multistart import judged, seeded_starts
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
@@ -208,15 +213,7 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
         ms = MultipleShooting(problem)
         ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
         regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
-    thetas = [
-        ("the start", np.zeros(len(problem.free))),
-        ("the equation-error estimate", regressed),
-        *((label, problem.theta_of(p)) for label, p in reference_sets(initial.variant)),
-        *(
-            (f"known point {i + 1} ({p.title})", problem.theta_of(p))
-            for i, p in enumerate(options.known_points)
-        ),
-    ]
+    thetas = candidate_thetas(problem, regressed, options.known_points)
     # The user's bounds and physics (0 of a friction fitted linearly) hold for every point the
     # fit may continue from; the default box, drawn around the start, does not.
     lower = np.where(problem.box_lower, -np.inf, problem.theta_lower)
@@ -237,10 +234,9 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     than its start (where it has already failed) if that point simulates the data better
     than the failed fit's end."""
     criterion = Criterion.of(result, recordings)
-    # Every point starts where the fit's trajectory does: its estimated initial state (a
-    # record at rest: velocities zero, positions within a sensor's resolution of the
-    # replay's). That favours the fit, so a point that still beats it is better.
-    starts = list(result.initial_states)
+    # Every point, the fit too, from where ``validate`` starts the written file: at rest
+    # where the record is, else the fit's estimated initial state (``judged_starts``).
+    starts = judged_starts(result)
     # A failed fit's end point is a point it knows too: a continuation must beat it (dev
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended
     # 300 x the reduction's training criterion; the failed fit's point simulated better).
@@ -260,9 +256,7 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
         result.diagnostics["known_points"] = report
         return result
     again = _started_from(_fit_widening(recordings, best.parameters, options), initial)
-    continued = (
-        criterion(again.parameters, list(again.initial_states)) if again.success else math.inf
-    )
+    continued = criterion(again.parameters, judged_starts(again)) if again.success else math.inf
     report[f"fit continued from {best.label}"] = continued
     if continued <= best.criterion + LIKELIHOOD_RATIO_95:
         again.diagnostics["known_points"] = report

@@ -11,19 +11,27 @@ the points it knows (issue 25, "never worse than a point it knows"):
 - the sets the user names (``FitOptions.known_points``).
 
 The criterion is what ``hframe-id validate`` reproduces: a free-run simulation of each
-training recording (``validation.replay.simulate_channels``) from the fit's initial state (a
-record at rest: velocities zero, positions within a sensor's resolution of the replay's
-rest state; this favours the fit: a point that still beats it is better), its residuals
-weighted by the sensors' noise std per channel,
+training recording (``validation.replay.simulate_channels``) from the replay's rest state for
+a record at rest, from the fit's estimated initial state for one that starts in motion
+(``judged_starts``), its residuals weighted by the sensors' noise std per channel,
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2,
 
 or, where the fit estimated its noise levels (model mismatch), concentrated over them: every
-point gets the levels that suit it best, C(p) = sum_j N_j / 2 ln(SSR_j(p) / N_j). Judged
-under the fit's own levels, which come from its own residuals, any other point would be
-judged on the fit's terms (a seeded start of the lubricated plant failed at 3.6 rad motor-angle
-rms with noise levels of 1.5-2 rad, under which Table 4.2 looked 300 x worse than it).
-Differences of either are likelihood-ratio statistics (``Criterion``).
+point gets the levels s_j >= sensor std_j that suit it best,
+
+    C(p) = sum_j N_j / 2 ln(s_j^2) + SSR_j(p) / (2 s_j^2) - N_j / 2,
+    s_j^2 = max(SSR_j(p) / N_j, std_j^2),
+
+which is sum_j N_j / 2 ln(SSR_j / N_j) while every channel is above its sensor's noise. The
+floor is the noise rounds' (``noise_rounds.noise_levels``): without it a point that fits one
+channel below its sensor's noise gains without bound (ln 0) whatever it does to the others.
+Judged under the fit's own levels, which come from its own residuals, any other point would
+be judged on the fit's terms (a seeded start of the lubricated plant failed at 3.6 rad
+motor-angle rms with noise levels of 1.5-2 rad, under which Table 4.2 looked 300 x worse than
+it). Judged from the fit's own initial states, likewise: that failed fit's estimated initial
+positions made every other point look worse than its 4.6 rad free run from rest. Differences
+of either are likelihood-ratio statistics (``Criterion``).
 
 Each known point enters with the fit's fixed parameters and its own values of the free ones,
 clipped into the user's bounds, not into the default box drawn around the start
@@ -66,11 +74,12 @@ def simulation_criterion(
     """C(p) of ``params`` on ``recordings`` (module docstring); ``channel_std`` [SI] per
     output; a channel lagging by ``latency_samples`` d is compared at sample k + d with the
     model at k; ``initial_states`` per recording (None: at rest). With ``concentrated`` the
-    noise levels are not given but estimated at ``params`` itself (``channel_std`` unused):
-    the concentrated criterion sum_j N_j / 2 ln(SSR_j / N_j) over channels j (N_j valid
-    samples, SSR_j their sum of squared residuals), which is what a fit that estimates its
-    noise levels minimises, and whose differences are likelihood-ratio statistics as
-    chi^2 / 2 differences are. inf if the simulation fails or leaves the finite numbers."""
+    noise levels are not given but estimated at ``params`` itself, floored at
+    ``channel_std`` (the sensors' std): the concentrated criterion, about sum_j N_j / 2
+    ln(SSR_j / N_j) over channels j (N_j valid samples, SSR_j their sum of squared
+    residuals), which is what a fit that estimates its noise levels minimises, and whose
+    differences are likelihood-ratio statistics as chi^2 / 2 differences are. inf if the
+    simulation fails or leaves the finite numbers."""
     from hframe_id.validation.replay import simulate_channels
 
     latency = latency_samples or {}
@@ -91,7 +100,7 @@ def simulation_criterion(
             counts[name] = counts.get(name, 0) + int(valid.sum())
     if concentrated:
         total = sum(
-            0.5 * counts[name] * math.log(max(squares[name], math.ulp(0.0)) / counts[name])
+            _concentrated_term(squares[name], counts[name], channel_std[name])
             for name in squares
             if counts[name]
         )
@@ -100,13 +109,34 @@ def simulation_criterion(
     return total if np.isfinite(total) else math.inf
 
 
+def _concentrated_term(squares: float, count: int, floor_std: float) -> float:
+    """One channel's term of the concentrated criterion: N / 2 ln(s^2) + SSR / (2 s^2) -
+    N / 2 with s^2 = max(SSR / N, ``floor_std``^2) (``squares`` SSR [SI^2], ``count`` N)."""
+    variance = squares / count
+    if variance >= floor_std**2:
+        return 0.5 * count * math.log(max(variance, math.ulp(0.0)))
+    floor = floor_std**2
+    return 0.5 * count * math.log(floor) + 0.5 * squares / floor - 0.5 * count
+
+
+def judged_starts(result) -> list[np.ndarray | None]:
+    """The initial state each training record of a ``FitResult`` is judged from: None (the
+    replay's rest state, what ``validate`` simulates) for a record at rest, the fit's
+    estimate for one that starts in motion."""
+    return [
+        None if experiment.at_rest else x0
+        for experiment, x0 in zip(result.problem.experiments, result.initial_states, strict=True)
+    ]
+
+
 @dataclass(frozen=True)
 class Criterion:
     """How a fit judges a parameter set: ``simulation_criterion`` on its training
     ``recordings``, under its noise levels ``channel_std`` [SI] and latencies, concentrated
     over the noise levels where the fit estimated them (``concentrated``: every point then
-    gets its own levels; judged under the fit's own, estimated from its residuals, any other
-    point would be judged on the fit's terms)."""
+    gets its own levels, floored at ``channel_std``, then the sensors' std; judged under the
+    fit's own, estimated from its residuals, any other point would be judged on the fit's
+    terms)."""
 
     recordings: tuple[Recording, ...]
     channel_std: dict[str, float]
@@ -117,12 +147,11 @@ class Criterion:
     def of(cls, result, recordings: Sequence[Recording]) -> Criterion:
         """The criterion of a ``FitResult``'s written file."""
         noise = result.diagnostics.get("noise") or {}
-        return cls(
-            tuple(recordings),
-            dict(result.diagnostics["channel_std"]),
-            dict(result.options.latency_samples),
-            noise.get("method") == "estimated",
-        )
+        concentrated = noise.get("method") == "estimated"
+        std = dict(result.diagnostics["channel_std"])
+        if concentrated:
+            std = {name: channel["sensor_std"] for name, channel in noise["channels"].items()}
+        return cls(tuple(recordings), std, dict(result.options.latency_samples), concentrated)
 
     def __call__(self, params: ParameterSet, initial_states=None) -> float:
         """C(params) from ``initial_states`` per recording (None: at rest)."""
@@ -162,6 +191,23 @@ def reference_sets(variant: str) -> list[tuple[str, ParameterSet]]:
             continue  # another model's file, or not a parameter file
         sets.append((Path(path).name, params))
     return sets
+
+
+def candidate_thetas(
+    problem, regressed: np.ndarray | None, user_points: Sequence[ParameterSet] = ()
+) -> list[tuple[str, np.ndarray]]:
+    """(label, theta of ``problem``) of every point a fit knows: the start (theta 0), the
+    equation-error estimate ``regressed`` (if any), the model's reference files
+    (``reference_sets``) and ``user_points`` (``FitOptions.known_points``); not clipped."""
+    return [
+        ("the start", np.zeros(len(problem.free))),
+        *([] if regressed is None else [("the equation-error estimate", regressed)]),
+        *((label, problem.theta_of(p)) for label, p in reference_sets(problem.initial.variant)),
+        *(
+            (f"known point {i + 1} ({p.title})", problem.theta_of(p))
+            for i, p in enumerate(user_points)
+        ),
+    ]
 
 
 def known_points(

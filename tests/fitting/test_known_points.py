@@ -115,24 +115,76 @@ def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, ste
     assert points["fit"] > points["known point 1 (H-frame 8th-order model, nonlinear friction)"]
 
 
-def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
-    """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
-    each point's own maximum-likelihood ones, less a constant, whatever levels are given."""
-    import numpy as np
-
+def _squares_and_counts(params, recordings):
+    """Per channel: the free run's sum of squared residuals [SI^2] and valid samples."""
     from hframe_id.validation.replay import simulate_channels
 
-    concentrated = simulation_criterion(table, steps, {}, concentrated=True)
     squares, counts = {}, {}
-    for rec in steps:
-        data, simulated = simulate_channels(table, rec)
+    for rec in recordings:
+        data, simulated = simulate_channels(params, rec)
         for j, name in enumerate(data.names):
             r = (data.measured[:, j] - simulated[:, j])[data.valid[:, j]]
             squares[name] = squares.get(name, 0.0) + float(r @ r)
             counts[name] = counts.get(name, 0) + r.size
+    return squares, counts
+
+
+def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
+    """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
+    each point's own maximum-likelihood ones, less a constant (floors far below them)."""
+    import numpy as np
+
+    squares, counts = _squares_and_counts(table, steps)
+    floors = dict.fromkeys(squares, 1e-12)
+    concentrated = simulation_criterion(table, steps, floors, concentrated=True)
     own_levels = {n: np.sqrt(squares[n] / counts[n]) for n in squares}
     at_own_levels = simulation_criterion(table, steps, own_levels)
     constant = sum(0.5 * counts[n] * (np.log(own_levels[n] ** 2) - 1.0) for n in squares)
     assert concentrated == pytest.approx(at_own_levels + constant, rel=1e-12)
     # The truth simulates these records better on every channel: lower either way.
-    assert simulation_criterion(truth, steps, {}, concentrated=True) < concentrated
+    assert simulation_criterion(truth, steps, floors, concentrated=True) < concentrated
+
+
+def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, steps):
+    """A channel fitted below its sensor's noise is judged at the sensor's level: N / 2
+    ln(std^2) + SSR / (2 std^2) - N / 2, not N / 2 ln(SSR / N), which goes to minus
+    infinity as SSR does whatever the other channels do."""
+    import math
+
+    squares, counts = _squares_and_counts(truth, steps)
+    floors = {n: 10 * math.sqrt(squares[n] / counts[n]) for n in squares}  # all floored
+    expected = sum(
+        0.5 * counts[n] * math.log(floors[n] ** 2)
+        + 0.5 * squares[n] / floors[n] ** 2
+        - 0.5 * counts[n]
+        for n in squares
+    )
+    floored = simulation_criterion(truth, steps, floors, concentrated=True)
+    assert floored == pytest.approx(expected, rel=1e-12)
+    unfloored = simulation_criterion(truth, steps, dict.fromkeys(floors, 1e-12), concentrated=True)
+    assert floored > unfloored
+
+
+def test_a_start_in_a_poorer_place_than_a_known_point_is_not_where_the_fit_starts(
+    table, truth, steps
+):
+    """The screened start (``start_screen``): the fit starts from the known point that
+    simulates the records best, here the truth named by the user, not from a start 2 x off
+    in stiffness and mass, and says so in its first stage."""
+    start = table.replace_values(k_l=table.values["k_l"] * 2, M_cart=table.values["M_cart"] * 2)
+    result = fit_recordings(steps, start, FitOptions(free=FREE, known_points=(truth,)))
+    first = result.stages[0]
+    assert first.name == "equation error"
+    assert "the fit starts from known point 1" in first.message
+    assert result.success, result.message
+    assert result.initial is start
+
+
+def test_records_at_rest_are_judged_from_the_replays_rest_state(table, steps):
+    """What ``validate`` reproduces: None (the replay's rest state) for every record of the
+    steps, which start at rest."""
+    from hframe_id.fitting.known_points import judged_starts
+
+    result = fit_recordings(steps[:1], table, FitOptions(free=("k_l",)))
+    assert all(e.at_rest for e in result.problem.experiments)
+    assert judged_starts(result) == [None]
