@@ -234,8 +234,8 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     than its start (where it has already failed) if that point simulates the data better
     than the failed fit's end."""
     criterion = Criterion.of(result, recordings)
-    # Every point, the fit too, from where ``validate`` starts the written file: at rest
-    # where the record is, else the fit's estimated initial state (``judged_starts``).
+    # Every point, the fit too, from the better of the fit's initial states and the
+    # replay's rest state, which ``validate`` starts the written file from (``judged_starts``).
     starts = judged_starts(result)
     # A failed fit's end point is a point it knows too: a continuation must beat it (dev
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended

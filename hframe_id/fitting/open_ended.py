@@ -89,7 +89,7 @@ def open_ends(
 ) -> list[OpenEnd]:
     """The ``OpenEnd`` test of each of ``names`` (free parameters of ``result``, a
     ``FitResult``, on its default box), by the criterion of its written file
-    (``known_points.Criterion``) from the states ``validate`` starts it from
+    (``known_points.Criterion``) from the fit's initial states or the replay's rest state
     (``known_points.judged_starts``)."""
     criterion = Criterion.of(result, recordings)
     starts = judged_starts(result)

@@ -180,11 +180,17 @@ def test_a_start_in_a_poorer_place_than_a_known_point_is_not_where_the_fit_start
     assert result.initial is start
 
 
-def test_records_at_rest_are_judged_from_the_replays_rest_state(table, steps):
-    """What ``validate`` reproduces: None (the replay's rest state) for every record of the
-    steps, which start at rest."""
-    from hframe_id.fitting.known_points import judged_starts
+def test_records_at_rest_are_also_judged_from_the_replays_rest_state(table, steps):
+    """Two alternatives: the fit's estimated initial states, and what ``validate`` replays,
+    None (the replay's rest state) for the steps, which start at rest; a point's criterion
+    is the lower."""
+    from hframe_id.fitting.known_points import Criterion, judged_starts
 
     result = fit_recordings(steps[:1], table, FitOptions(free=("k_l",)))
     assert all(e.at_rest for e in result.problem.experiments)
-    assert judged_starts(result) == [None]
+    own, replay = judged_starts(result)
+    assert replay == [None]
+    assert own[0] is result.initial_states[0] or (own[0] == result.initial_states[0]).all()
+    criterion = Criterion.of(result, steps[:1])
+    both = criterion(result.parameters, (own, replay))
+    assert both == min(criterion(result.parameters, (own,)), criterion(result.parameters))
