@@ -3,8 +3,8 @@
     python -m studies.fit_stages worn          # a named plant (studies.unseen_plants.NAMED)
     python -m studies.fit_stages 10            # a drawn plant, by its seed
 
-Prints each stage (name, iterations, wall time [s], converged, cost), the verdict, the noise
-levels the fit weighed with [SI] and the fitted values [SI], as JSON lines for comparisons.
+Prints each stage (name, iterations, wall time [s], converged, cost), the verdict, where the
+fit started and the known points' criteria, the noise levels the fit weighed with [SI] and the fitted values [SI], as JSON lines for comparisons.
 """
 
 from __future__ import annotations
@@ -35,6 +35,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     print(f"{'success' if result.success else 'FAILED'}: {result.message}")
     print(f"wall {wall:.1f} s, noise rounds {result.diagnostics['noise']['rounds']}")
+    print(f"first stage: {result.stages[0].message}")
+    print(f"known points: {json.dumps(result.diagnostics.get('known_points'))}")
     channels = result.diagnostics["noise"]["channels"]
     print(json.dumps({name: c["weight_std"] for name, c in channels.items()}))
     print(json.dumps(result.parameters.values))

@@ -32,7 +32,6 @@ import numpy as np
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import fit_result
 from hframe_id.fitting.held_uncertainty import include_held_uncertainty
-from hframe_id.fitting.known_points import candidate_thetas
 from hframe_id.fitting.noise_rounds import MISMATCH_RMS, estimate_noise, noise_report
 from hframe_id.fitting.options import (
     FitOptions,
@@ -51,7 +50,6 @@ from hframe_id.fitting.stages import (
     exact_stage,
     penalty_stage,
 )
-from hframe_id.fitting.start_screen import screened_start
 from hframe_id.fitting.statistics import Statistics, compute_statistics
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -125,12 +123,7 @@ def fit_in_box(
     regression = None
     if options.first_stage:
         theta = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
-        # The start by the criterion of the written file (a free run): an output-error fit's.
-        screen = None
-        if options.continuity == "exact":
-            candidates = candidate_thetas(problem, theta, options.known_points)
-            screen = screened_start(problem, recordings, candidates, nodes[ms.first_window])
-        regression = (theta, time.perf_counter() - start, screen)
+        regression = (theta, time.perf_counter() - start)
     # One-axis (a coordinate no output measures): first with the node states estimated at
     # the parameters held (converges from the truth on fresh plants, where the path from the
     # measured nodes left it); if that fails, the path from the measured nodes (which fits
@@ -293,21 +286,40 @@ def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting
 
 
 def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, regression):
-    """Equation-error start (``regression``: its theta, the seconds it took and the screened
-    start, ``start_screen.ScreenedStart`` or None; or None), output-error stages and the
-    identifiability holds, from the given start (with the state-estimation pre-pass if
-    ``prepass``)."""
+    """Equation-error start (``regression``: its theta and the seconds it took, or None),
+    output-error stages and the identifiability holds, from the given start (with the
+    state-estimation pre-pass if ``prepass``)."""
     options = problem.options
     start = time.perf_counter()
     n_free = len(problem.free)
     theta = np.zeros(n_free)
+    smoothing = problem.smoothing
     if regression is not None:
-        regressed, seconds, screen = regression
-        theta, outcome = _start_theta(
-            problem, ms, nodes, velocity, prepass, regressed, screen, progress
-        )
+        regressed, seconds = regression
+        # Keep the regression only if it fits the data better than the given start does
+        # (both judged by the output error of independent shooting windows: one evaluation
+        # each). It is biased and can be poor where a coordinate is not measured.
+        if prepass:
+            # Judged after estimating the node states at each: from the measured nodes (an
+            # unmeasured coordinate on the rigid motion) the truth itself can lose to a
+            # poorer regression (docs/fitting.md, "One-axis").
+            active0 = np.ones(n_free, dtype=bool)
+            trials = [
+                estimate_states(ms, nodes, velocity, th, active0, [], progress)
+                for th in (theta, regressed)
+            ]
+            costs = [merit for _, merit in trials]
+        else:
+            probe = ms.subset(np.arange(ms.n_windows), linked=False)
+            costs = [
+                probe.evaluate(nodes, th, smoothing, velocity_hint=velocity, derivatives=False).cost
+                for th in (theta, regressed)
+            ]
         counter["evaluations"] += 2
-        stages.append(equation_error_report(seconds + time.perf_counter() - start, outcome))
+        used = bool(np.isfinite(costs[1]) and costs[1] < costs[0])
+        if used:
+            theta = regressed
+        stages.append(equation_error_report(seconds + time.perf_counter() - start, used))
     active = np.ones(n_free, dtype=bool)
     state, gn = _solve(
         problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass, True
@@ -326,40 +338,6 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, r
         )
 
     return _hold_unidentified(problem, ms, state, gn, stats, stages, resolve)
-
-
-def _start_theta(problem, ms, nodes, velocity, prepass, regressed, screen, progress):
-    """(theta, what was decided) of the output-error stages' start: the screened start
-    (``screen``, the best known point by the free-run criterion) where there is one and no
-    pre-pass; else the equation-error estimate ``regressed`` if it fits the data better than
-    the given start (theta 0) does. It is biased and can be poor where a coordinate is not
-    measured."""
-    if screen is not None and not prepass:
-        return screen.theta, screen.statement()
-    start = np.zeros(len(problem.free))
-    if prepass:
-        # Judged after estimating the node states at each: from the measured nodes (an
-        # unmeasured coordinate on the rigid motion) the truth itself can lose to a
-        # poorer regression (docs/fitting.md, "One-axis").
-        active0 = np.ones(len(problem.free), dtype=bool)
-        trials = [
-            estimate_states(ms, nodes, velocity, th, active0, [], progress)
-            for th in (start, regressed)
-        ]
-        costs = [merit for _, merit in trials]
-    else:
-        # Without a free-run criterion (continuity "none": a plant whose simulation drifts),
-        # by the output error of independent shooting windows: one evaluation each.
-        probe = ms.subset(np.arange(ms.n_windows), linked=False)
-        costs = [
-            probe.evaluate(
-                nodes, th, problem.smoothing, velocity_hint=velocity, derivatives=False
-            ).cost
-            for th in (start, regressed)
-        ]
-    if np.isfinite(costs[1]) and costs[1] < costs[0]:
-        return regressed, "used as the start"
-    return start, "worse than the given start, not used"
 
 
 def _hold_unidentified(problem, ms, state, gn, stats, stages, resolve):

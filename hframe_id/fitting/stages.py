@@ -95,15 +95,16 @@ def estimate_states(ms, nodes, velocity, theta, active, stages, progress):
     return state.nodes, merit
 
 
-def equation_error_report(seconds: float, outcome: str) -> StageReport:
-    """The report of the equation-error stage: ``seconds`` [s] and ``outcome``, what became
-    of its estimate (which point the fit started from)."""
+def equation_error_report(seconds: float, used: bool) -> StageReport:
+    """The report of the equation-error stage: ``seconds`` [s] and whether its estimate was
+    kept as the start."""
     return StageReport(
         name="equation error",
         smoothing=(math.nan, math.nan),
         iterations=0,
         converged=True,
-        message=f"regression on differentiated data: {outcome}",
+        message="regression on differentiated data: "
+        + ("used as the start" if used else "worse than the given start, not used"),
         cost=math.nan,
         max_defect=math.nan,
         wall_time_s=seconds,

@@ -165,21 +165,6 @@ def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, step
     assert floored > unfloored
 
 
-def test_a_start_in_a_poorer_place_than_a_known_point_is_not_where_the_fit_starts(
-    table, truth, steps
-):
-    """The screened start (``start_screen``): the fit starts from the known point that
-    simulates the records best, here the truth named by the user, not from a start 2 x off
-    in stiffness and mass, and says so in its first stage."""
-    start = table.replace_values(k_l=table.values["k_l"] * 2, M_cart=table.values["M_cart"] * 2)
-    result = fit_recordings(steps, start, FitOptions(free=FREE, known_points=(truth,)))
-    first = result.stages[0]
-    assert first.name == "equation error"
-    assert "the fit starts from known point 1" in first.message
-    assert result.success, result.message
-    assert result.initial is start
-
-
 def test_records_at_rest_are_also_judged_from_the_replays_rest_state(table, steps):
     """Two alternatives: the fit's estimated initial states, and what ``validate`` replays,
     None (the replay's rest state) for the steps, which start at rest; a point's criterion
