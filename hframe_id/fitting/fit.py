@@ -228,11 +228,11 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
 
 def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
-    written file (a free-run simulation of each record from the fit's initial state,
-    ``known_points.Criterion``): ended worse than one, it continues from the best of them;
-    worse still, it fails saying so. A fit that failed continues from the best point other
-    than its start (where it has already failed) if that point simulates the data better
-    than the failed fit's end."""
+    written file (a free-run simulation of each record, ``known_points.Criterion``): ended
+    worse than one, it continues from the best of them; worse still, it fails saying so. A
+    fit that failed continues from each point it knows other than its start (where it has
+    already failed), best first, until a continuation succeeds no worse than the failed
+    fit's end and than the point it started from."""
     criterion = Criterion.of(result, recordings)
     # Every point, the fit too, from the better of the fit's initial states and the
     # replay's rest state, which ``validate`` starts the written file from (``judged_starts``).
@@ -244,32 +244,41 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     candidates = _known_candidates(recordings, initial, options, result)
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
-    if not candidates:
-        return result
     points = known_points(candidates, criterion, starts)
-    best = points[0]
     report = {"fit": own, **{p.label: p.criterion for p in points}}
     result.diagnostics["known_points_criterion"] = criterion.name
+    result.diagnostics["known_points"] = report
     # Differences under LIKELIHOOD_RATIO_95 are not significant at 95 %: such a point is not
     # better, and a continued fit that ends there has reached it.
-    if best.criterion >= own - LIKELIHOOD_RATIO_95:
-        result.diagnostics["known_points"] = report
+    tried = (
+        points
+        if not result.success
+        else [p for p in points[:1] if p.criterion < own - LIKELIHOOD_RATIO_95]
+    )
+    for point in tried:
+        again = _started_from(_fit_widening(recordings, point.parameters, options), initial)
+        continued = criterion(again.parameters, judged_starts(again)) if again.success else math.inf
+        report[f"fit continued from {point.label}"] = continued
+        if continued <= min(point.criterion, own) + LIKELIHOOD_RATIO_95:
+            again.diagnostics["known_points"] = report
+            again.diagnostics["known_points_criterion"] = criterion.name
+            why = "failed" if not result.success else "ended worse"
+            return replace(
+                again,
+                message=f"{again.message}; continued from {point.label}, where the first fit {why}",
+            )
+    if not tried:
         return result
-    again = _started_from(_fit_widening(recordings, best.parameters, options), initial)
-    continued = criterion(again.parameters, judged_starts(again)) if again.success else math.inf
-    report[f"fit continued from {best.label}"] = continued
-    if continued <= best.criterion + LIKELIHOOD_RATIO_95:
-        again.diagnostics["known_points"] = report
-        again.diagnostics["known_points_criterion"] = criterion.name
-        why = "failed" if not result.success else "ended worse"
-        return replace(
-            again,
-            message=f"{again.message}; continued from {best.label}, where the first fit {why}",
-        )
-    result.diagnostics["known_points"] = report
     if not result.success:
-        ended = "failed too" if not again.success else f"ended worse than it ({continued:.6g})"
-        return replace(result, message=result.message + f"; a fit from {best.label} {ended}")
+        return replace(
+            result,
+            message=result.message
+            + "; fits continued from "
+            + ", ".join(p.label for p in tried)
+            + " failed or ended worse than it",
+        )
+    best = tried[0]
+    continued = report[f"fit continued from {best.label}"]
     return replace(
         result,
         success=False,
