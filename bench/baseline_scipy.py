@@ -48,7 +48,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from hframe_id.errors import FitError, OptionError
-from hframe_id.fitting.experiment import applied_inputs, default_channel_std
+from hframe_id.fitting.dataset import Dataset
+from hframe_id.fitting.problem import rigid_modes
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -317,7 +318,8 @@ def _trajectory(
 
 @dataclass(frozen=True)
 class _Data:
-    """Experiments prepared for simulation: one column block per experiment, equal lengths."""
+    """The experiments' Datasets stacked for simulation: one column block per experiment,
+    zero-padded to equal lengths."""
 
     x0: np.ndarray  # (n_x, E) measured rest states
     inputs: np.ndarray  # (n_u, E * (N - 1)) applied voltages of samples 0 .. N-2
@@ -335,34 +337,36 @@ class _Data:
 
 
 def _rest_state(
-    model: Model,
-    p: np.ndarray,
-    output_matrix: np.ndarray,
-    rest_mean: np.ndarray,
-    rest_weight: np.ndarray,
-    rest_state: str,
+    model: Model, p: np.ndarray, output_matrix: np.ndarray, data: Dataset, rest_state: str
 ) -> np.ndarray:
-    """State at rest from the mean outputs over the pre-roll.
+    """State at rest from each channel's mean valid reading over the pre-roll (the samples
+    before the first non-zero command), weighted by sqrt(readings) / noise std.
 
     ``"measured"``: each measured coordinate at its mean reading, the others 0.
     ``"relaxed"``: the position with every belt spring relaxed (the model's only rest
-    position with smoothed friction) that best fits the readings, weighted by their noise. The
+    position with smoothed friction: ``rigid_modes``) that best fits the readings. The
     springs' null space ties the laser positions to the encoders, which resolve the belt
     0.1 um (r * encoder step / sqrt(12)), against 0.7 um for 50 averaged laser samples: a laser
     offset of that size in a stretched belt would shift the motors by ~6 encoder sigmas for the
     whole record and bias the fit.
     """
+    moving = np.flatnonzero(np.any(data.recording.inputs != 0, axis=1))
+    n_rest = max(int(moving[0]) if moving.size else data.n_samples, 1)
+    rest_mean = np.zeros(len(data.names))
+    rest_weight = np.zeros(len(data.names))
+    for k, name in enumerate(data.names):
+        rest = data.valid[:n_rest, k]
+        if not rest.any():
+            raise FitError(f"{data.name}: no valid {name!r} sample at rest to start from")
+        rest_mean[k] = data.measured[:n_rest, k][rest].mean()
+        rest_weight[k] = math.sqrt(rest.sum()) / data.noise_std[k]
     nq = len(model.coordinates)
     selection = output_matrix[:, :nq]
     x0 = np.zeros(model.n_states)
     if rest_state == "measured":
         x0[:nq] = np.linalg.lstsq(selection, rest_mean, rcond=None)[0]
         return x0
-    q = ca.SX.sym("q", nq)
-    _, potential = model.energy(ca.vertcat(q, ca.SX.zeros(nq)), p)
-    stiffness = np.array(ca.Function("K", [q], [ca.hessian(potential, q)[0]])(np.zeros(nq)))
-    _, singular, vt = np.linalg.svd(stiffness)
-    null = vt[singular <= singular.max() * 1e-9].T  # rigid motions: belts unstretched
+    null = rigid_modes(model, p)
     a = np.linalg.lstsq(
         rest_weight[:, None] * (selection @ null), rest_weight * rest_mean, rcond=None
     )[0]
@@ -373,8 +377,9 @@ def _rest_state(
 def _prepare(
     model: Model, recordings: Sequence[Recording], p0: np.ndarray, rest_state: str
 ) -> _Data:
+    """The recordings on the model's channels (``Dataset``), stacked in equal-length column
+    blocks, each starting from its rest state (``_rest_state``)."""
     dt = recordings[0].sample_period_s
-    names = [o.name for o in model.outputs]
     x_sym = ca.SX.sym("x", model.n_states)
     c_sym = ca.jacobian(model.output(x_sym), x_sym)
     if not c_sym.is_constant():
@@ -384,7 +389,7 @@ def _prepare(
     n_exp = len(recordings)
     x0 = np.zeros((model.n_states, n_exp))
     inputs = np.zeros((model.n_inputs, n_exp, n - 1))
-    measured = np.zeros((n_exp, n, len(names)))
+    measured = np.zeros((n_exp, n, len(model.outputs)))
     weights = np.zeros_like(measured)
     mask = np.zeros(measured.shape, dtype=bool)
     for e, rec in enumerate(recordings):
@@ -401,36 +406,12 @@ def _prepare(
         steps = np.diff(rec.time_s)
         if not np.allclose(steps, dt, rtol=1e-6, atol=1e-9):
             raise FitError(f"{where}: samples are not uniformly spaced at {dt} s")
-        if tuple(rec.input_names) != tuple(i.name for i in model.inputs):
-            raise FitError(
-                f"{where}: inputs {rec.input_names}, model needs "
-                f"{tuple(i.name for i in model.inputs)}"
-            )
-        applied = applied_inputs(rec)
-        if not np.all(np.isfinite(applied)):
-            raise FitError(f"{where}: inputs contain non-finite values")
-        inputs[:, e, : rec.n_samples - 1] = applied[:-1].T
-        # Rest samples: those before the first non-zero command (the pre-roll).
-        moving = np.flatnonzero(np.any(rec.inputs != 0, axis=1))
-        n_rest = max(int(moving[0]) if moving.size else rec.n_samples, 1)
-        rest_mean = np.zeros(len(names))
-        rest_weight = np.zeros(len(names))
-        for j, name in enumerate(rec.output_names):
-            if name not in names:
-                raise FitError(f"{where}: output {name!r} is not one of the model's {names}")
-            column = rec.outputs[:, j]
-            ok = rec.valid[:, j] & np.isfinite(column)
-            sigma = default_channel_std(rec, name)
-            k = names.index(name)
-            measured[e, : rec.n_samples, k] = np.where(ok, column, 0.0)
-            weights[e, : rec.n_samples, k] = 1.0 / sigma
-            mask[e, : rec.n_samples, k] = ok
-            rest = ok[:n_rest]
-            if not rest.any():
-                raise FitError(f"{where}: no valid {name!r} sample at rest to start from")
-            rest_mean[k] = column[:n_rest][rest].mean()
-            rest_weight[k] = math.sqrt(rest.sum()) / sigma
-        x0[:, e] = _rest_state(model, p0, output_matrix, rest_mean, rest_weight, rest_state)
+        data = Dataset.from_recording(model, rec)
+        inputs[:, e, : rec.n_samples - 1] = data.inputs[:-1].T
+        measured[e, : rec.n_samples] = np.where(data.valid, data.measured, 0.0)
+        weights[e, : rec.n_samples] = 1.0 / data.noise_std
+        mask[e, : rec.n_samples] = data.valid
+        x0[:, e] = _rest_state(model, p0, output_matrix, data, rest_state)
     return _Data(
         x0=x0,
         inputs=inputs.reshape(model.n_inputs, -1),

@@ -11,15 +11,22 @@ names the file (``where``) and, for YAML, the line. The limits:
   file expands to hundreds of millions of values, and every consumer that walks or prints
   it expands them again);
 - a key given twice in one mapping (or JSON object) is an error, not the last one silently
-  winning.
+  winning;
+- a YAML integer beyond the largest float (``1`` and 400 zeros) is an error where it is
+  read, not an ``OverflowError`` in whatever converts it to a float later (a recording's
+  JSON samples check each field's number themselves, naming the field).
 """
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 import re
+import stat
+import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import yaml
 
@@ -31,6 +38,8 @@ MAX_BYTES = 10 * 2**20
 MAX_DEPTH = 32
 #: Most values that YAML aliases may add to a document when expanded.
 MAX_ALIAS_NODES = 10_000
+#: Largest integer read: beyond it no float holds the value (``float(10**400)`` raises).
+MAX_INTEGER = sys.float_info.max
 
 
 class _Refused(yaml.YAMLError):
@@ -85,6 +94,13 @@ class _LimitedLoader(yaml.SafeLoader):
             self._sizes[id(node)] = 1 + sum(self._size(child) for child in children)
         return self._sizes[id(node)]
 
+    def construct_yaml_int(self, node):
+        value = super().construct_yaml_int(node)
+        if abs(value) > MAX_INTEGER:
+            digits = len(str(abs(value)))
+            raise _Refused(f"an integer of {digits} digits, beyond any float", node.start_mark)
+        return value
+
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
             seen: dict[Any, int] = {}
@@ -103,6 +119,9 @@ class _LimitedLoader(yaml.SafeLoader):
                 except TypeError:  # an unhashable key: PyYAML's own error follows
                     continue
         return super().construct_mapping(node, deep)
+
+
+_LimitedLoader.add_constructor("tag:yaml.org,2002:int", _LimitedLoader.construct_yaml_int)
 
 
 def _where_in_yaml(err: yaml.YAMLError) -> str:
@@ -176,10 +195,23 @@ def load_json(data: bytes | str, where: str, error: type[HframeIdError]) -> Any:
         raise error(f"{where}: not JSON ({err})") from None
 
 
+def open_input(path: Path) -> BinaryIO:
+    """``path`` opened for reading in binary. A named pipe that no program writes to reads
+    as empty instead of waiting forever (opened without blocking, then read blocking); a
+    device is an ``OSError`` (``/dev/zero`` never ends: read whole, it used all memory)."""
+    descriptor = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    mode = os.fstat(descriptor).st_mode
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        os.close(descriptor)
+        raise OSError(errno.EINVAL, "a device, not a file", str(path))
+    os.set_blocking(descriptor, True)
+    return open(descriptor, "rb")
+
+
 def read_text(path: Path, kind: str, error: type[HframeIdError]) -> str:
     """The UTF-8 text of a file of ``kind`` (for the messages); ``error`` for a binary,
     non-UTF-8 or oversized file, ``OSError`` if it cannot be read at all."""
-    with path.open("rb") as stream:
+    with open_input(path) as stream:
         data = stream.read(MAX_BYTES + 1)
     if len(data) > MAX_BYTES:
         raise error(f"{path}: larger than {MAX_BYTES // 2**20} MB; not a {kind}")

@@ -68,3 +68,16 @@ def shown(value: object) -> str:
     user gave: a hostile value (a megabyte string, a YAML alias bomb) is never expanded."""
     text = _REPR.repr(value)
     return text if len(text) <= MAX_SHOWN else text[: MAX_SHOWN - 3] + "..."
+
+
+#: The most characters of an error message the command line prints (``bounded_message``).
+MAX_MESSAGE = 280
+
+
+def bounded_message(message: object) -> str:
+    """A message (an error, a warning) on one line of at most ``MAX_MESSAGE`` characters:
+    the safety net behind ``shown`` for a message that echoes a value without it (a
+    100 000-column CSV header, a path of 300 characters), so that no input can flood the
+    terminal."""
+    text = " ".join(str(message).split())
+    return text if len(text) <= MAX_MESSAGE else text[: MAX_MESSAGE - 3] + "..."

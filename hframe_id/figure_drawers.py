@@ -69,21 +69,18 @@ def _serve(connections: list, prepare: Callable[[], None] | None) -> None:
 
 
 def _answer(connection) -> None:
-    """Draw each task received on ``connection`` until None or the end of the pipe."""
-    while True:
-        try:
-            task = connection.recv()
-        except EOFError:  # the command is gone
-            return
-        if task is None:
-            return
-        function, args = task
-        try:
-            function(*args)
-        except Exception as err:  # noqa: BLE001 - every failure goes back to the command
-            connection.send(err)
-        else:
-            connection.send(None)
+    """Draw each task received on ``connection`` until None or the end of the pipe: the
+    command is gone (interrupted), also when an answer finds the pipe closed, which used to
+    end the worker with a traceback under the command's "interrupted" line."""
+    with contextlib.suppress(EOFError, OSError):
+        while (task := connection.recv()) is not None:
+            function, args = task
+            try:
+                function(*args)
+            except Exception as err:  # noqa: BLE001 - every failure goes back to the command
+                connection.send(err)
+            else:
+                connection.send(None)
 
 
 class FigureWorkerError(RuntimeError):

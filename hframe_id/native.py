@@ -43,7 +43,8 @@ import signal
 import subprocess
 import tempfile
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -55,6 +56,9 @@ logger = logging.getLogger(__name__)
 #: Seconds one compiler run may take before it counts as failed (the largest simulator, a
 #: map over 10^5 samples, takes about 20 s on a loaded 2-core machine).
 COMPILE_TIMEOUT_S = 600
+#: Seconds the compiler's ``--version`` may take (it answers in milliseconds): a compiler
+#: that hangs is then no compiler (CasADi evaluates), not a 600 s wait with nothing shown.
+VERSION_TIMEOUT_S = 10
 #: Cache size [bytes] beyond which the least recently used libraries are deleted.
 MAX_CACHE_BYTES = 512 * 2**20
 #: Flags every shared library needs.
@@ -181,14 +185,35 @@ def _compiler_identity(name: str) -> tuple[str, str] | None:
     if path is None:
         return None
     try:
-        result = subprocess.run(
-            [path, "--version"], capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S
-        )
+        process = _start([path, "--version"])
+        with _group_killed_on_error(process):
+            stdout, _ = process.communicate(timeout=VERSION_TIMEOUT_S)
     except (OSError, subprocess.SubprocessError):
         return None
-    if result.returncode != 0 or not result.stdout:
+    if process.returncode != 0 or not stdout:
         return None
-    return path, result.stdout.splitlines()[0]
+    return path, stdout.splitlines()[0]
+
+
+def _start(command: Sequence[str]) -> subprocess.Popen:
+    """Start ``command`` (a compiler) in a session of its own, its output piped as text."""
+    return subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+
+
+@contextmanager
+def _group_killed_on_error(process: subprocess.Popen) -> Iterator[None]:
+    """On any exception in the block (a timeout, Ctrl-C, SIGTERM), kill the whole process
+    group of ``process`` (started by ``_start``: the driver and cc1, as, ld; or the script
+    a ``$CC`` names and what it runs), not only its first process, whose children would
+    otherwise run on; the terminal's Ctrl-C does not reach the group itself."""
+    try:
+        yield
+    except BaseException:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.communicate()
+        raise
 
 
 def compiler() -> tuple[str, str] | None:
@@ -274,10 +299,8 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
     """Compile ``source`` with ``flags`` into ``library`` (atomically); the reason as one
     line if the compiler fails or times out, else None.
 
-    The compiler runs in a session of its own: on a timeout, Ctrl-C or SIGTERM (any
-    exception while waiting) the whole group (driver, cc1, as, ld) is killed, not only the
-    driver, whose children would otherwise run on; the terminal's Ctrl-C does not reach the
-    group itself, so it is killed here, before the exception goes on.
+    The compiler runs in a session of its own, killed as a group on a timeout, Ctrl-C or
+    SIGTERM (``_group_killed_on_error``) before the exception goes on.
     """
     library.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=library.parent) as scratch:
@@ -286,23 +309,14 @@ def _run_compiler(path: str, flags: Sequence[str], source: str, library: Path) -
         built = Path(scratch) / library.name
         command = [path, *flags, *LIBRARY_FLAGS, str(c_file), "-o", str(built), "-lm"]
         try:
-            process = subprocess.Popen(
-                command,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-                start_new_session=True,
-            )
+            process = _start(command)
         except OSError as err:
             return f"{Path(path).name}: {err}"
         try:
-            stderr = _wait(process, library, len(source))
-        except BaseException as err:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.communicate()
-            if isinstance(err, subprocess.TimeoutExpired):
-                return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
-            raise
+            with _group_killed_on_error(process):
+                stderr = _wait(process, library, len(source))
+        except subprocess.TimeoutExpired:
+            return f"{Path(path).name} took more than {COMPILE_TIMEOUT_S} s"
         if process.returncode != 0:
             errors = [line for line in stderr.splitlines() if "error" in line]
             detail = (errors or stderr.splitlines() or ["no message"])[0]

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import warnings
 from collections.abc import Sequence
 
 from hframe_id.cli import model_files, progress, signals
-from hframe_id.errors import HframeIdError
+from hframe_id.errors import HframeIdError, bounded_message, shown
 
 #: The subcommands in the order ``hframe-id --help`` lists them: (name, module, one line of
 #: help). To add a command, write a module with ``register(subparsers)`` and add its line.
@@ -134,7 +135,19 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` for the command line: one line, without source location."""
-    print(f"hframe-id: warning: {' '.join(str(message).split())}", file=file or sys.stderr)
+    print(f"hframe-id: warning: {bounded_message(message)}", file=file or sys.stderr)
+
+
+def _detach_stdout() -> None:
+    """Point standard output at /dev/null, so that Python's own flush at exit does not fail
+    again on what could not be written."""
+    try:
+        descriptor = sys.stdout.fileno()
+    except (OSError, ValueError):  # not a file (the tests' capture): nothing flushes at exit
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, descriptor)
+    os.close(devnull)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -142,10 +155,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     chosen subcommand and return its exit status (0 success, 1 a fit or check that failed,
     2 bad input, 130 Ctrl-C or SIGTERM, each reported in one line)."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(chosen_command(argv))
     try:
         with signals.handled():
             try:
+                # Ctrl-C while the command's module is imported: one line too
+                parser = build_parser(chosen_command(argv))
                 args = parser.parse_args(argv)  # a numeric option out of range: OptionError
                 with (
                     warnings.catch_warnings(),
@@ -155,16 +169,24 @@ def main(argv: Sequence[str] | None = None) -> int:
                     model_files.load(args)
                     code = int(args.handler(args) or 0)
                 signals.check()  # a signal whose exception was lost in C code
+                sys.stdout.flush()  # a full disk or a closed pipe shows here, not at exit
                 return code
             except Exception:
                 signals.check()  # the interrupt, come out of C code as another exception
                 raise
     except HframeIdError as err:
-        print(f"hframe-id: error: {err}", file=sys.stderr)
+        print(f"hframe-id: error: {bounded_message(err)}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
         sys.stderr.close()
         return 0
+    except OSError as err:  # one no command handles, e.g. standard output on a full disk
+        _detach_stdout()
+        problem = err.strerror or str(err)
+        where = shown(str(err.filename)) if err.filename else "standard output"
+        line = f"{where}: {problem}"
+        print(f"hframe-id: error: {bounded_message(line)}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as err:
         detail = f": {err}" if str(err) else " (Ctrl-C)"
         print(f"hframe-id: interrupted{detail}", file=sys.stderr)

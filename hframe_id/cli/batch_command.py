@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
@@ -16,6 +17,11 @@ from hframe_id.errors import Interrupted, OptionError
 
 if TYPE_CHECKING:  # Dask is imported when a batch runs, not for --help
     from distributed import Client
+
+
+#: Most LocalCluster workers: 4 per CPU (each is a Python process with CasADi loaded;
+#: --workers 100000 tried to start them all).
+MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,8 +55,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--workers",
         int,
         at_least=1,
+        at_most=MAX_WORKERS,
         metavar="N",
-        help="LocalCluster worker processes, one thread each (default: the CPU count)",
+        help="LocalCluster worker processes, one thread each (default: the CPU count; "
+        f"at most {MAX_WORKERS}, 4 per CPU)",
     )
     parser.add_argument("--force", action="store_true", help="redo fits already stored")
     parser.add_argument(

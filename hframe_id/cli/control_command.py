@@ -13,12 +13,13 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hframe_id.cli.numbers import add_number
+from hframe_id.cli.numbers import MAX_SUBSTEPS, add_number
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
     check_file,
     check_length,
+    output_file,
     written_together,
 )
 from hframe_id.cli.progress import Progress, add_quiet_option
@@ -117,12 +118,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--friction", metavar="{smooth,stick-slip,sign}", default="smooth")
     add_number(
-        parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
+        parser,
+        "--substeps",
+        int,
+        at_least=1,
+        at_most=MAX_SUBSTEPS,
+        help="RK4 substeps per sample (default: auto)",
     )
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")
     out.add_argument("--plot", type=Path, metavar="DIR", help="write the four figures here")
-    out.add_argument("--csv", type=Path, help="write the closed-loop signals to this CSV file")
+    out.add_argument(
+        "--csv", type=output_file("--csv"), help="write the closed-loop signals to this CSV file"
+    )
     add_force_option(out)
     add_quiet_option(out)
     parser.set_defaults(handler=run)

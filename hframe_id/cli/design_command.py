@@ -11,8 +11,18 @@ import argparse
 from pathlib import Path
 
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import add_force_option, check_file, check_length, written_together
+from hframe_id.cli.outputs import (
+    add_force_option,
+    check_file,
+    check_length,
+    output_file,
+    written_together,
+)
 from hframe_id.errors import OptionError, shown
+
+#: Most parameter sets drawn: a 4 s design with 2 draws takes about 14 s (docs/design.md),
+#: so 100 is the better part of an hour; 100 000 ran for days.
+MAX_DRAWS = 100
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -75,10 +85,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "predicted for them (model error) scale every prediction",
     )
     add_number(
-        parser, "--draws", int, at_least=0, default=2, help="parameter sets drawn (default 2)"
+        parser,
+        "--draws",
+        int,
+        at_least=0,
+        at_most=MAX_DRAWS,
+        default=2,
+        help=f"parameter sets drawn (default 2, at most {MAX_DRAWS}; each costs about a "
+        "prediction at the file's values)",
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="seed of the draws (0)")
-    parser.add_argument("--out", type=Path, required=True, help="design to write (.csv)")
+    parser.add_argument(
+        "--out", type=output_file("--out"), required=True, help="design to write (.csv)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     add_force_option(parser)
     parser.set_defaults(handler=run)

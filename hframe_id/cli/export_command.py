@@ -38,12 +38,12 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.parameters import load_parameter_file
 
     fmt = export_format(args.format)
-    if fmt.binary and not args.out:
+    if fmt.binary and args.out is None:
         raise OptionError(f"format {fmt.name} writes a binary {fmt.suffix} file: give --out PATH")
-    if args.out:
+    if args.out is not None:
         check_file(args.out, "--out", args.force)
     data = render(load_parameter_file(args.file), fmt)
-    if args.out:
+    if args.out is not None:
         path = write_atomic(args.out, data, overwrite=args.force)
         print(f"wrote {path} ({fmt.name})", file=sys.stderr)
     else:

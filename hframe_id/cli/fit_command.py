@@ -443,6 +443,12 @@ def _print_mismatch(result: FitResult, stream) -> None:
         print("  ".join(cells).rstrip(), file=stream)
 
 
+def _remove_made(out_dir: Path, created: bool) -> None:
+    """Remove ``out_dir`` if this command ``created`` it and it is still empty."""
+    if created and not any(out_dir.iterdir()):
+        out_dir.rmdir()
+
+
 def _write_outputs(
     result: FitResult,
     recordings: list[Recording],
@@ -456,7 +462,8 @@ def _write_outputs(
     ``drawer`` (None: no plots). The parameter file is the fit's result: once written it is
     kept, and a failure of the report (which leaves nothing of itself) is a warning on
     stderr, the report then None. A failure before the parameter file leaves nothing (nor
-    ``out_dir`` if this created it)."""
+    ``out_dir`` if this created it), and so does Ctrl-C or SIGTERM while the report is
+    written: the user stopped the command, which then leaves none of its outputs."""
     from hframe_id.fitting.output import write_parameter_file
     from hframe_id.fitting.report import write_report
 
@@ -470,8 +477,7 @@ def _write_outputs(
             result, recordings, paths, initial_path, out_dir
         )
     except BaseException:
-        if created and not any(out_dir.iterdir()):
-            out_dir.rmdir()
+        _remove_made(out_dir, created)
         raise
     try:
         report = write_report(
@@ -484,6 +490,11 @@ def _write_outputs(
             plots=drawer is not None,
             drawer=drawer,
         )
+    except KeyboardInterrupt:
+        if parameter_file is not None:
+            parameter_file.unlink(missing_ok=True)
+        _remove_made(out_dir, created)
+        raise
     except Exception as err:  # the fit is kept: a report is a view of it
         print(
             f"hframe-id: warning: the report was not written ({type(err).__name__}: {err}); "

@@ -58,7 +58,7 @@ def fit_options(args: argparse.Namespace) -> FitOptions:
         smoothing = tuple(_float(p, "--smoothing") for p in parts)
     extra = {"threads": args.threads} if args.threads is not None else {}
     return FitOptions(
-        free=_names(args.free) if args.free else None,
+        free=_names(args.free) if args.free is not None else None,
         fix=_names(args.fix),
         bounds=bounds,
         bound_factor=args.bound_factor,

@@ -18,6 +18,11 @@ REPORT_PAGE = "fleet-report.md"
 REPORT_PLOTS = "plots"
 
 
+#: Most weekly runs (rigs x weeks) one ``fleet make`` records: 10 000 runs are 30 000
+#: recordings, hours of work and about 2.7 GB; 100 000 x 100 000 started as if feasible.
+MAX_RUNS = 10_000
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``hframe-id fleet make`` and ``hframe-id fleet report`` to ``subparsers``."""
     parser = subparsers.add_parser(
@@ -95,6 +100,12 @@ def run_make(args: argparse.Namespace) -> int:
         signals.check()  # an interrupt swallowed while recording (numpy, CasADi): ends here
         progress.line(f"{rig} week {week}: recorded")
 
+    runs = args.rigs * args.weeks
+    if runs > MAX_RUNS:
+        raise OptionError(
+            f"--rigs {args.rigs} x --weeks {args.weeks} is {runs:,} weekly runs; at most "
+            f"{MAX_RUNS:,} (each is three recordings, about 1 s)"
+        )
     out = check_dir(args.out, "--out", empty=True)
     with written_together() as staging:
         folder = staging.folder(out)

@@ -7,6 +7,7 @@ import datetime as dt
 import sys
 
 from hframe_id.cli.outputs import add_force_option, check_file
+from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 from hframe_id.recordings.import_spec import ROLES, ColumnMap, ImportSpec
 from hframe_id.recordings.units import KNOWN_UNITS
@@ -53,6 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, metavar="PATH", help="the recording (.mcap)")
     add_force_option(parser)
+    add_quiet_option(parser)
     parser.add_argument(
         "--variant", required=True, help="model variant of the rig (letters, digits, '-', '_')"
     )
@@ -137,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
     except OptionError as err:
         raise OptionError(f"{args.file}: {err}") from None
     check_file(args.out, "--out", args.force, make_parents=True)
-    result = import_recording(args.file, args.out, spec, overwrite=args.force)
+    with Progress(args.quiet).slow(f"importing {args.file}"):  # a long log: tens of seconds
+        result = import_recording(args.file, args.out, spec, overwrite=args.force)
     channels = result.channels
     print(
         f"wrote {result.path}: {result.n_samples} samples at {result.sample_period_s * 1e3:g} "

@@ -297,4 +297,4 @@ def plot(recording: Recording, target: Path) -> None:
     axes[-1].set_xlabel("time [s]")
     figure.suptitle(recording.name())
     figure.tight_layout()
-    figure.savefig(target, dpi=100)
+    figure.savefig(target, format="png", dpi=100)  # whatever the name ends with

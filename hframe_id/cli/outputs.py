@@ -19,13 +19,13 @@ from __future__ import annotations
 import argparse
 import os
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from hframe_id.atomic import Staging
 from hframe_id.cli import signals
-from hframe_id.errors import OptionError
+from hframe_id.errors import OptionError, shown
 
 
 def add_force_option(parser: argparse.ArgumentParser, *aliases: str) -> None:
@@ -61,13 +61,38 @@ def _nearest_folder(path: Path, option: str, target: Path) -> Path:
 
 
 def _check_target(path: Path, option: str, force: bool, folder: bool) -> None:
-    """``path`` is of the kind it will be written as, and new unless ``force``."""
+    """``path`` is of the kind it will be written as, and new unless ``force``. An output
+    is put in place by a rename, which would replace a device, a pipe or a socket (as root,
+    ``--out /dev/null --force`` would delete the system's /dev/null): those are refused even
+    with ``--force``."""
     if folder and path.exists() and not path.is_dir():
         raise OptionError(f"{option} {path}: exists and is not a directory")
     if not folder and path.is_dir():
         raise OptionError(f"{option} {path}: is a directory, not a file")
+    if not folder and path.exists() and not path.is_file():
+        raise OptionError(
+            f"{option} {path}: is a device, pipe or socket, not a file; give a file's path"
+        )
     if (path.exists() or path.is_symlink()) and not force:
         raise OptionError(f"{option} {path}: exists already; pass --force to replace it")
+
+
+def _file_name(text: str, option: str) -> Path:
+    """``text`` as the path of a file: not empty and not ending with a separator (which
+    ``Path`` would drop, writing a file where the user meant a folder)."""
+    if not text or text.endswith(os.sep):
+        raise OptionError(f"{option} {shown(text)}: a file's path is needed")
+    return Path(text)
+
+
+def output_file(option: str) -> Callable[[str], Path]:
+    """An argparse ``type=`` for an output file's option: its path, checked as
+    ``_file_name`` (the rest of the guard, ``check_file``, runs before the command's work)."""
+
+    def parse(text: str) -> Path:
+        return _file_name(text, option)
+
+    return parse
 
 
 def check_file(
@@ -76,7 +101,7 @@ def check_file(
     """Check that the file ``path`` (given with ``option``) can be written: not a folder, new
     unless ``force``, its folder exists (or, with ``make_parents``, its nearest existing
     ancestor is a folder) and accepts new files."""
-    path = Path(path)
+    path = _file_name(os.fspath(path), option)
     _check_target(path, option, force, folder=False)
     if not make_parents and not path.parent.exists():
         raise OptionError(f"{option} {path}: folder {path.parent} does not exist")

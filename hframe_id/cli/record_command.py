@@ -9,7 +9,7 @@ from pathlib import Path
 
 from hframe_id.cli.json_output import emit
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import add_force_option, check_file, check_length
+from hframe_id.cli.outputs import add_force_option, check_file, check_length, output_file
 from hframe_id.errors import OptionError
 
 
@@ -100,7 +100,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="step/pulse/multisine: 0 V recorded before the excitation [s] (0.05)",
     )
     out = parser.add_argument_group("output")
-    out.add_argument("--out", type=Path, required=True, help="recording to write (.mcap)")
+    out.add_argument(
+        "--out", type=output_file("--out"), required=True, help="recording to write (.mcap)"
+    )
     add_force_option(out, "--overwrite")
     out.add_argument("--operator", help="who runs the experiment (default: login name)")
     out.add_argument("--notes", default="", help="free text for the experiment metadata")
@@ -242,6 +244,24 @@ def _clamp_sentence(clamp: dict, low: float, high: float) -> str:
     )
 
 
+def _check_multisine(args: argparse.Namespace, period_s: float) -> None:
+    """The multisine's options agree with the rig's sample period and the record: its
+    components are laid out over one --period (which must fit in --duration after the
+    pre-roll) and lie below the Nyquist frequency (higher ones would alias)."""
+    check_length(args.period, period_s, "--period")
+    nyquist_hz = 0.5 / period_s
+    if args.band[1] >= nyquist_hz:
+        raise OptionError(
+            f"--band: {args.band[1]:g} Hz reaches the Nyquist frequency {nyquist_hz:g} Hz of the "
+            f"rig's {period_s * 1e3:g} ms sample period; give F_MAX below it"
+        )
+    if args.duration is not None and args.duration < args.pre_roll + args.period:
+        raise OptionError(
+            f"--duration {args.duration:g} s is shorter than the pre-roll {args.pre_roll:g} s "
+            f"+ one --period {args.period:g} s of the multisine"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id record``: the protocol on the rig, recorded to ``--out``.
 
@@ -255,8 +275,8 @@ def run(args: argparse.Namespace) -> int:
     rig = make_rig(args)
     try:
         period = rig.info.sample_period_s
-        if args.protocol == "multisine":  # its components are laid out over one --period
-            check_length(args.period, period, "--period")
+        if args.protocol == "multisine":
+            _check_multisine(args, period)
         protocol = _protocol(args, len(rig.info.inputs))
         duration = protocol.duration_s
         if duration is None:  # a sequence: its last row plus one sample

@@ -16,12 +16,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.numbers import add_number
+from hframe_id.cli.numbers import MAX_SUBSTEPS, add_number
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
     check_file,
     check_length,
+    output_file,
     written_together,
 )
 from hframe_id.cli.progress import Progress, add_quiet_option
@@ -88,12 +89,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "its own",
     )
     add_number(
-        parser, "--substeps", int, at_least=1, help="RK4 substeps per sample (default: auto)"
+        parser,
+        "--substeps",
+        int,
+        at_least=1,
+        at_most=MAX_SUBSTEPS,
+        help="RK4 substeps per sample (default: auto)",
     )
-    parser.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    parser.add_argument("--out", type=output_file("--out"), required=True, help="CSV file to write")
     parser.add_argument(
         "--mcap",
-        type=Path,
+        type=output_file("--mcap"),
         help="also record the same inputs with the sim rig (sensor models) to this MCAP file",
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="--mcap: sensor noise seed (0)")

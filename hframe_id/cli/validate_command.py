@@ -9,10 +9,14 @@ import argparse
 import json
 import sys
 import warnings
+from typing import TYPE_CHECKING
 
 from hframe_id.cli.fit_command import resolve_dataset
 from hframe_id.cli.outputs import add_force_option, check_dir, written_together
 from hframe_id.errors import OptionError
+
+if TYPE_CHECKING:  # the validation package (NumPy, CasADi) is imported when the command runs
+    from hframe_id.validation import ValidationOptions
 
 #: The defaults of ``ValidationOptions``, stated in --help without importing the validation
 #: (SciPy, CasADi); tests/cli/test_cli_help.py checks that they agree.
@@ -116,6 +120,19 @@ def _read(names: list[str]) -> list:
     return recordings
 
 
+def _check_lengths(options: ValidationOptions, name: str, samples: int) -> None:
+    """The options counted in samples fit in the recording ``name`` of ``samples`` samples:
+    the largest lag, the prediction's window and horizon, the open-loop RMSE's start."""
+    spans = {
+        "--max-lag": options.max_lag,
+        "--window + --horizon": options.window + options.horizon if options.horizon else 0,
+        "--init-samples": options.init_samples,
+    }
+    for option, span in spans.items():
+        if span >= samples:
+            raise OptionError(f"{option} {span}: longer than {name} ({samples} samples)")
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id validate``: fit [%] and residual tests as text or JSON, plots if asked."""
     from hframe_id.parameters import load_parameter_file
@@ -133,10 +150,7 @@ def run(args: argparse.Namespace) -> int:
     parameter_sets = [load_parameter_file(path) for path in [args.fit, *args.params]]
     recordings = _read(args.recordings)
     for name, recording in zip(args.recordings, recordings, strict=True):
-        if options.max_lag >= len(recording.time_s):
-            raise OptionError(
-                f"--max-lag {options.max_lag}: longer than {name} ({len(recording.time_s)} samples)"
-            )
+        _check_lengths(options, name, len(recording.time_s))
     plot_dir = None
     if args.plot:
         names = plot_names([r.name() for r in recordings], labels_of(parameter_sets))

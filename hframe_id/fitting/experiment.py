@@ -1,13 +1,13 @@
-"""One recording prepared for fitting on a model's channels: SI, the voltages the plant saw,
-validity, each channel's default noise level; and the checks that recordings fitted jointly
-come from one rig.
+"""What a recording's rig metadata say of its channels: the voltages the plant saw (the
+rig's DAC), each channel's default noise level, and the checks that recordings fitted
+jointly come from one rig. The recording on a model's channels is a
+:class:`hframe_id.fitting.dataset.Dataset`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -28,27 +28,6 @@ RIG_IDENTITY_KEYS = (
     "laser_noise_std_m",
     "dac_bits",
 )
-
-
-@dataclass(frozen=True)
-class Experiment:
-    """One recording, prepared for fitting (SI, samples on the model's output order)."""
-
-    name: str
-    inputs: np.ndarray  # (N, n_u) voltages the plant saw [V] (after the DAC)
-    outputs: np.ndarray  # (N, n_y) measurements, NaN where missing
-    valid: np.ndarray  # (N, n_y) bool: usable samples
-    recording: Recording
-    #: True where the record starts at rest (``FitOptions.initial_state``): its initial
-    #: velocities are zero, not estimated; its positions are (a sensor's offset within its
-    #: resolution: an encoder's quantization phase is up to one step, 1.7 std, for the
-    #: whole record, which averaging cannot remove)
-    at_rest: bool = False
-
-    @property
-    def n_samples(self) -> int:
-        """Samples in the experiment."""
-        return int(self.inputs.shape[0])
 
 
 def rig_dac(rig: dict) -> SensorModel | None:
@@ -160,36 +139,3 @@ def check_rigs(recordings: Sequence[Recording]) -> None:
                 f"recordings have different sample periods: {first.sample_period_s} s "
                 f"({first.name()}) and {rec.sample_period_s} s ({rec.name()})"
             )
-
-
-def prepare_experiment(rec: Recording, model: Model, latency: dict[str, int]) -> Experiment:
-    """The recording on the model's inputs and outputs; a channel with a latency of d
-    samples (``FitOptions.latency_samples``) is advanced by d, its last d samples invalid."""
-    inputs = applied_inputs(rec)
-    in_names = [s.name for s in model.inputs]
-    if tuple(rec.input_names) != tuple(in_names):
-        raise FitError(
-            f"{rec.name()}: inputs {list(rec.input_names)} do not match model {model.variant} "
-            f"inputs {in_names}"
-        )
-    columns = []
-    for out in model.outputs:
-        if out.name not in rec.output_names:
-            raise FitError(
-                f"{rec.name()}: no output {out.name!r} (has {list(rec.output_names)}) for model "
-                f"{model.variant}"
-            )
-        columns.append(list(rec.output_names).index(out.name))
-    outputs = np.asarray(rec.outputs, dtype=float)[:, columns]
-    valid = np.asarray(rec.valid, dtype=bool)[:, columns] & np.isfinite(outputs)
-    for j, out in enumerate(model.outputs):
-        lag = latency.get(out.name, 0)
-        if lag:
-            outputs[:-lag, j], valid[:-lag, j] = outputs[lag:, j], valid[lag:, j]
-            valid[-lag:, j] = False
-    if not np.all(np.isfinite(inputs)):
-        raise FitError(f"{rec.name()}: inputs contain non-finite values")
-    if rec.aborted:
-        # An aborted run is still a valid record of what the plant did up to the abort.
-        pass
-    return Experiment(rec.name(), inputs, np.where(valid, outputs, np.nan), valid, rec)

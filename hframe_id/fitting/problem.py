@@ -6,8 +6,10 @@ A fit is a weighted output-error least-squares problem over one or more experime
 
 with w_j = 1 / std_j (encoder quantization step / sqrt(12), laser noise), invalid samples left
 out, free parameters in log scale, theta = ln(p / p_initial), within bounds. The recordings
-on the model's channels are prepared in :mod:`hframe_id.fitting.experiment`; the transcription
-(multiple shooting) and the solver (Gauss-Newton) live in their own modules.
+on the model's channels are prepared in :mod:`hframe_id.fitting.dataset` (its
+``state_outputs``, ``output_kinds`` and ``REST_SAMPLES`` are re-exported here, where the
+transcription and the design import them); the transcription (multiple shooting) and the
+solver (Gauss-Newton) live in their own modules.
 """
 
 from __future__ import annotations
@@ -22,25 +24,15 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.experiment import (
-    Experiment,
-    check_rigs,
-    default_channel_std,
-    encoder_step,
-    prepare_experiment,
-)
+from hframe_id.fitting.dataset import REST_SAMPLES as REST_SAMPLES
+from hframe_id.fitting.dataset import Dataset
+from hframe_id.fitting.dataset import output_kinds as output_kinds
+from hframe_id.fitting.dataset import state_outputs as state_outputs
+from hframe_id.fitting.experiment import check_rigs, encoder_step
 from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-
-#: A record starts at rest (``starts_at_rest``) unless some channel's velocity at its first
-#: sample, fitted over its first ``REST_SAMPLES``, differs from zero by more than ``REST_Z``
-#: of its standard errors (a two-sided test at 0.27 % per channel). 10 ms at 1 kHz: within
-#: the pre-roll of every protocol here (>= 50 ms); the replay averages a record at rest over
-#: them for its rest positions (``validation.replay.rest_state``).
-REST_Z = 3.0
-REST_SAMPLES = 10
 
 #: A window needs at least this many valid output values per free quantity it brings; a
 #: whole record needs this many valid values per estimated quantity (states + parameters).
@@ -64,7 +56,7 @@ class FitProblem:
     #: neither a physical limit (0 of a nonnegative parameter) nor the user's ``bounds``
     box_lower: np.ndarray
     box_upper: np.ndarray
-    experiments: tuple[Experiment, ...]
+    experiments: tuple[Dataset, ...]
     channel_std: np.ndarray  # (n_y,) [SI]
     quantization: np.ndarray  # (n_y,) encoder step [rad] of quantized channels, else 0
     sample_period_s: float
@@ -211,53 +203,14 @@ def held_priors(model: Model, options: ProblemOptions) -> dict[str, float]:
     return {n: s for n, s in priors.items() if n not in fixed}
 
 
-def starts_at_rest(
-    outputs: np.ndarray,
-    valid: np.ndarray,
-    channel_std: np.ndarray,
-    samples: int,
-    dt: float,
-    kinds: Sequence[str] | None = None,
-) -> bool:
-    """Whether a record shows rest at its start: per channel of ``outputs`` (N, n_y), y = a +
-    b t + c t^2 fitted to its ``valid`` samples among the first ``samples``, and no |b| above
-    ``REST_Z`` of its standard error (white noise of ``channel_std`` [SI]). A record cut in
-    motion starts with a velocity (b); one at rest, or accelerating slowly from it, does
-    not. ``kinds`` (``output_kinds``, default all positions): a channel measuring a rate
-    shows rest by its value (|a| within ``REST_Z`` standard errors of 0); another function
-    of the state (a motor current) tells nothing and is not tested. Too few samples, or no
-    channel to tell: at rest is not assumed."""
-    kinds = kinds or ("position",) * outputs.shape[1]
-    t = np.arange(min(samples, outputs.shape[0])) * dt
-    design = np.stack([np.ones_like(t), t, t**2], axis=1)
-    tested = [j for j in range(outputs.shape[1]) if kinds[j] != "other"]
-    if not tested:
-        return False
-    for j in tested:
-        used = valid[: t.size, j]
-        if np.count_nonzero(used) <= design.shape[1]:
-            return False
-        a = design[used]
-        coef, *_ = np.linalg.lstsq(a, outputs[: t.size, j][used], rcond=None)
-        term = 0 if kinds[j] == "rate" else 1
-        std = channel_std[j] * math.sqrt(np.linalg.inv(a.T @ a)[term, term])
-        if abs(coef[term]) > REST_Z * std:
-            return False
-    return True
-
-
-def _with_initial_state(
-    experiment: Experiment, sensor_std: np.ndarray, kinds: Sequence[str], options
-) -> Experiment:
-    """``experiment`` marked at rest (``Experiment.at_rest``) per ``options.initial_state``:
+def _with_initial_state(dataset: Dataset, sensor_std: np.ndarray, options) -> Dataset:
+    """``dataset`` marked at rest (``Dataset.at_rest``) per ``options.initial_state``:
     always ("rest"), never ("estimate"), or where its first ``REST_SAMPLES`` show rest with
-    the sensors' noise ``sensor_std`` [SI] on channels of ``kinds`` (``output_kinds``)
-    ("auto"; the test ``hframe-id validate`` applies, ``validation.replay.shows_rest``)."""
+    the sensors' noise ``sensor_std`` [SI] ("auto"; ``Dataset.shows_rest``, the test
+    ``hframe-id validate`` applies)."""
     if options.initial_state != "auto":
-        return replace(experiment, at_rest=options.initial_state == "rest")
-    dt = float(experiment.recording.sample_period_s)
-    rest = starts_at_rest(experiment.outputs, experiment.valid, sensor_std, REST_SAMPLES, dt, kinds)
-    return replace(experiment, at_rest=rest)
+        return replace(dataset, at_rest=options.initial_state == "rest")
+    return replace(dataset, at_rest=dataset.shows_rest(sensor_std))
 
 
 def build_problem(
@@ -281,21 +234,20 @@ def build_problem(
     spaces = _parameter_spaces(model, p0, free_names, wanted)
     free = tuple(names.index(n) for n in free_names)
     experiments = _experiments(recordings, model, options.shooting_interval, wanted)
-    outputs = [s.name for s in model.outputs]
+    # The first recording's sensors weigh every channel (the recordings share one rig).
+    first = experiments[0]
     std = np.array(
         [
-            wanted.channel_std.get(name) or default_channel_std(recordings[0], name, model)
-            for name in outputs
+            wanted.channel_std.get(name) or sensor
+            for name, sensor in zip(first.names, first.noise_std, strict=True)
         ]
     )
-    sensor_std = np.array([default_channel_std(recordings[0], name, model) for name in outputs])
-    kinds = output_kinds(model)
-    experiments = tuple(_with_initial_state(e, sensor_std, kinds, wanted) for e in experiments)
+    experiments = tuple(_with_initial_state(e, first.noise_std, wanted) for e in experiments)
     # Only an angle the output is (not a speed or a current named phi...) is an encoder's.
     quantization = np.array(
         [
             encoder_step(recordings[0], name) if kind == "position" else 0.0
-            for name, kind in zip(outputs, kinds, strict=True)
+            for name, kind in zip(first.names, first.kinds, strict=True)
         ]
     )
     _check_sample_counts(model, experiments, len(free))
@@ -434,11 +386,11 @@ def _parameter_spaces(
 
 def _experiments(
     recordings: Sequence[Recording], model: Model, shooting_interval: int, wanted: ProblemOptions
-) -> tuple[Experiment, ...]:
-    """The recordings on the model's channels (``prepare_experiment``) with their
-    ``latency_samples``; ``FitError`` for ``channel_std`` or ``latency_samples`` naming no
-    output, a record not longer than a ``shooting_interval`` [samples], or an output with no
-    valid sample."""
+) -> tuple[Dataset, ...]:
+    """The recordings on the model's channels (``Dataset.from_recording``) advanced by their
+    ``latency_samples`` (``Dataset.delayed``); ``FitError`` for ``channel_std`` or
+    ``latency_samples`` naming no output, a record not longer than a ``shooting_interval``
+    [samples], or an output with no valid sample."""
     outputs = [s.name for s in model.outputs]
     for name in wanted.channel_std:
         if name not in outputs:
@@ -453,7 +405,7 @@ def _experiments(
                 f"valid: {', '.join(outputs)}"
             )
     latency = dict(wanted.latency_samples)
-    experiments = tuple(prepare_experiment(rec, model, latency) for rec in recordings)
+    experiments = tuple(Dataset.from_recording(model, rec).delayed(latency) for rec in recordings)
     for e in experiments:
         if shooting_interval >= len(e.valid):
             raise FitError(
@@ -466,7 +418,7 @@ def _experiments(
     return experiments
 
 
-def _check_sample_counts(model: Model, experiments: Sequence[Experiment], n_free: int) -> None:
+def _check_sample_counts(model: Model, experiments: Sequence[Dataset], n_free: int) -> None:
     """``FitError`` unless every experiment, and all of them together, have
     ``MIN_VALID_PER_UNKNOWN`` valid output values per quantity they estimate (the initial
     states, and the ``n_free`` free parameters)."""
@@ -510,34 +462,6 @@ def output_matrix(model: Model, p: np.ndarray | None = None) -> np.ndarray:
     c = ca.Function("c", [x, u, q], [ca.jacobian(model.output_map(x, u, q), x)])
     values = np.ones(len(model.parameters)) if p is None else p
     return np.array(c(np.zeros(model.n_states), np.zeros(model.n_inputs), values))
-
-
-def state_outputs(model: Model) -> np.ndarray:
-    """(n_y,) the index of the state each output is (y_j = x_i: a coordinate, or a rate a
-    tachometer measures), -1 for an output that is any other function of (x, u, p)."""
-    x = ca.SX.sym("x", model.n_states)
-    u = ca.SX.sym("u", model.n_inputs)
-    p = ca.SX.sym("p", len(model.parameters))
-    y = model.output_map(x, u, p)
-    index = np.full(y.numel(), -1)
-    for j in range(y.numel()):
-        slope = ca.jacobian(y[j], ca.vertcat(x, u, p))
-        offset = ca.substitute(y[j], x, ca.SX.zeros(model.n_states))
-        if ca.depends_on(slope, ca.vertcat(x, u, p)) or not offset.is_zero():
-            continue
-        row = np.array(ca.evalf(slope)).ravel()
-        if np.count_nonzero(row) == 1 and row[: model.n_states].max() == 1.0:
-            index[j] = int(np.argmax(row))
-    return index
-
-
-def output_kinds(model: Model) -> tuple[str, ...]:
-    """Per output: ``"position"`` (a coordinate), ``"rate"`` (a coordinate's rate) or
-    ``"other"`` (any other function of the state, inputs and parameters)."""
-    nq = model.n_states // 2
-    return tuple(
-        "other" if i < 0 else "position" if i < nq else "rate" for i in state_outputs(model)
-    )
 
 
 def rigid_modes(model: Model, p: np.ndarray) -> np.ndarray:

@@ -223,6 +223,11 @@ def load_timeout_s() -> float:
     return value
 
 
+def _timer_usable() -> bool:
+    """Whether ``_timer`` can interrupt this thread (the main thread, where signals come)."""
+    return hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+
+
 @contextmanager
 def _timer(seconds: float) -> Iterator[None]:
     """Raise ``_LoadTimeout`` in the block after ``seconds`` (0: never).
@@ -235,8 +240,7 @@ def _timer(seconds: float) -> Iterator[None]:
     CasADi call that does not end) is not interrupted either. The previous handler and
     timer are put back afterwards.
     """
-    usable = hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
-    if not (seconds > 0 and usable):
+    if not (seconds > 0 and _timer_usable()):
         yield
         return
 
@@ -252,32 +256,68 @@ def _timer(seconds: float) -> Iterator[None]:
         signal.signal(signal.SIGALRM, previous)
 
 
+#: Seconds a file may run beyond the load timeout when it defeats the timer (catches its
+#: exception in a loop, ignores SIGALRM or stops the timer) before the process is ended.
+LOAD_GRACE_S = 2.0
+
+
+@contextmanager
+def _last_resort(seconds: float, line: str) -> Iterator[None]:
+    """End the process with the error ``line`` and exit status 2 if the block still runs
+    after ``seconds`` (0: never): for a file that defeats ``_timer``, which nothing else can
+    stop. A daemon thread, cancelled when the block ends; the command line's outputs are
+    written after the files are loaded, so none is left half-made. Where ``_timer`` does
+    not run (a Dask worker's thread) neither does this: the load has no limit there."""
+    if not (seconds > 0 and _timer_usable()):
+        yield
+        return
+
+    def expire() -> None:
+        print(f"hframe-id: error: {line}", file=sys.__stderr__, flush=True)
+        os._exit(2)
+
+    watchdog = threading.Timer(seconds, expire)
+    watchdog.daemon = True
+    watchdog.start()
+    try:
+        yield
+    finally:
+        watchdog.cancel()
+
+
+def _hanging(kind: str, path: Path, seconds: float) -> str:
+    return (
+        f"{kind} {path}: still running after {seconds:g} s (a loop or a wait at import?); "
+        "HFRAME_ID_LOAD_TIMEOUT sets the limit"
+    )
+
+
 @contextmanager
 def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iterator[None]:
     """Run a model or controller file's code (``kind``: ``"model file"``, ...) so that every
-    way it can end is one ``error`` naming the file: an exception (with the file's line),
-    ``sys.exit`` (any status, 0 too), a ``KeyboardInterrupt`` it raises itself, or running
-    longer than ``load_timeout_s()``. The user's own Ctrl-C or SIGTERM (``Interrupted``)
-    passes through, to end the command."""
+    way it can end is one ``error`` naming the file: an exception (with the file's line; any
+    ``BaseException``, ``GeneratorExit`` too), ``sys.exit`` (any status, 0 too), a
+    ``KeyboardInterrupt`` it raises itself, or running longer than ``load_timeout_s()``. A
+    file that defeats the timer ends the process ``LOAD_GRACE_S`` later with the same line
+    (``_last_resort``). The user's own Ctrl-C or SIGTERM (``Interrupted``) passes through,
+    to end the command. Only ``os._exit`` in the file escapes: it ends the process at once."""
     seconds = load_timeout_s()
     try:
-        with _timer(seconds):
-            yield
+        with _last_resort(seconds and seconds + LOAD_GRACE_S, _hanging(kind, path, seconds)):
+            with _timer(seconds):
+                yield
     except ModelError as err:
         message = str(err)
         raise error(message if str(path) in message else f"{path}: {message}") from None
     except _LoadTimeout:
-        raise error(
-            f"{kind} {path}: still running after {seconds:g} s (a loop or a wait at import?); "
-            "HFRAME_ID_LOAD_TIMEOUT sets the limit"
-        ) from None
+        raise error(_hanging(kind, path, seconds)) from None
     except SystemExit as err:
         raise error(f"{kind} {path}: calls sys.exit({shown(err.code)}) while loaded") from None
     except Interrupted:
         raise
     except KeyboardInterrupt:
         raise error(f"{kind} {path}: raises KeyboardInterrupt while loaded") from None
-    except Exception as err:
+    except BaseException as err:  # GeneratorExit too: a BaseException of its own
         raise error(f"{kind} {path}: {error_line(err, path)}") from None
 
 

@@ -186,6 +186,18 @@ RIG_REQUIRED = (
     "laser_min_m",
     "laser_max_m",
 )
+#: The numeric ``rig`` keys and the range of each, checked when a recording is read (a
+#: recording whose encoder has 0 counts per revolution used to fail deep in the fitter):
+#: (lowest value, whether the lowest value itself is allowed); every one finite.
+RIG_NUMBERS: dict[str, tuple[float, bool]] = {
+    "sample_period_s": (0.0, False),
+    "encoder_counts_per_rev": (1.0, True),
+    "dac_bits": (1.0, True),
+    "laser_noise_std_m": (0.0, True),
+    "pulley_radius_m": (0.0, False),
+}
+#: ``rig`` keys that hold a range as (low key, high key): low < high.
+RIG_RANGES = (("dac_min_v", "dac_max_v"), ("laser_min_m", "laser_max_m"))
 #: Keys every ``rig`` metadata record of a ``SignalSample`` recording has.
 SIGNAL_RIG_REQUIRED = (
     "variant",

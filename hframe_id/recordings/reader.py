@@ -14,6 +14,7 @@ killed; says how much was recovered) and ``SequenceGapWarning`` (samples lost on
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 import tempfile
@@ -32,7 +33,7 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from hframe_id.documents import load_json
+from hframe_id.documents import load_json, open_input
 from hframe_id.errors import HframeIdError, LogFormatError, shown
 from hframe_id.parameters import ParameterSet, load_parameter_file
 from hframe_id.recordings import log_format as fmt
@@ -97,7 +98,8 @@ def read_log(path: str | os.PathLike) -> LogContents:
     """Read every record up to the end of the file or of its last complete chunk."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        with open_input(path) as stream:
+            data = stream.read()
     except FileNotFoundError:
         raise LogFormatError(f"{path}: no such file") from None
     except IsADirectoryError:
@@ -338,12 +340,34 @@ def _rig_metadata(
             f"{where}: rig.variant {shown(variant)} is not a model variant name (letters, digits, "
             "'-', '_')"
         )
-    sample_period_s = rig["sample_period_s"]
-    if not isinstance(sample_period_s, int | float) or not sample_period_s > 0:
-        raise LogFormatError(
-            f"{where}: rig.sample_period_s must be > 0, got {shown(sample_period_s)}"
-        )
-    return rig, variant, sample_period_s
+    _check_rig_numbers(where, rig)
+    return rig, variant, rig["sample_period_s"]
+
+
+def _check_rig_numbers(where: str, rig: dict[str, Any]) -> None:
+    """The numeric ``rig`` keys present are finite numbers in their ranges
+    (``fmt.RIG_NUMBERS``, ``fmt.RIG_RANGES``)."""
+    for key, (lowest, allowed) in fmt.RIG_NUMBERS.items():
+        if key not in rig:
+            continue
+        value = rig[key]
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (
+            number and math.isfinite(value) and (value >= lowest if allowed else value > lowest)
+        ):
+            bound = f"{'>=' if allowed else '>'} {lowest:g}"
+            raise LogFormatError(f"{where}: rig.{key} must be a number {bound}, got {shown(value)}")
+    for low, high in fmt.RIG_RANGES:
+        if low in rig and high in rig and not _numbers_ordered(rig[low], rig[high]):
+            raise LogFormatError(
+                f"{where}: rig.{low} {shown(rig[low])} must be a number below rig.{high} "
+                f"{shown(rig[high])}"
+            )
+
+
+def _numbers_ordered(low: Any, high: Any) -> bool:
+    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high))
+    return numbers and math.isfinite(low) and math.isfinite(high) and low < high
 
 
 def _sample_decoder(

@@ -178,7 +178,9 @@ def _read_csv(path: Path) -> SourceTable:
     except csv.Error:
         delimiter = ","
     try:
-        rows = list(csv.reader(lines[start:], delimiter=delimiter))
+        # row by row in Python, not list(): one C call over millions of rows holds the GIL
+        # and delays Ctrl-C for seconds
+        rows = [row for row in csv.reader(lines[start:], delimiter=delimiter)]
     except csv.Error as err:
         raise SourceDataError(f"{path}: not a readable CSV file ({err})") from None
     header = [name.strip() for name in rows[0]]

@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from hframe_id.errors import OptionError
+from hframe_id.documents import open_input
+from hframe_id.errors import OptionError, shown
 
 
 def _samples(name: str, seconds: float, period_s: float, minimum: int = 0) -> int:
@@ -309,10 +310,10 @@ def load_sequence_csv(path: str | os.PathLike, duration_s: float | None = None) 
     """Read a voltage sequence: header ``time [s],u1 [V][,u2 [V]]``, then one row per change."""
     path = Path(path)
     try:
-        with path.open("rb") as stream:
-            if b"\0" in stream.read(65536):
-                raise OptionError(f"{path}: binary data, not a CSV voltage sequence")
-        raw = path.read_bytes()
+        with open_input(path) as stream:
+            raw = stream.read()
+        if b"\0" in raw[:65536]:
+            raise OptionError(f"{path}: binary data, not a CSV voltage sequence")
     except OSError as err:
         raise OptionError(f"{path}: cannot read the voltage sequence ({err.strerror})") from None
     try:
@@ -327,7 +328,7 @@ def load_sequence_csv(path: str | os.PathLike, duration_s: float | None = None) 
     if len(header) < 2 or header != expected:
         raise OptionError(
             f"{path}: header must be 'time [s],u1 [V]' or 'time [s],u1 [V],u2 [V]', got "
-            f"{','.join(header)!r}"
+            f"{shown(','.join(header))}"
         )
     times, volts = [], []
     for line, row in enumerate(rows[1:], start=2):
@@ -336,7 +337,7 @@ def load_sequence_csv(path: str | os.PathLike, duration_s: float | None = None) 
         try:
             numbers = [float(v) for v in row]
         except ValueError:
-            raise OptionError(f"{path}: row {line} is not all numbers: {row}") from None
+            raise OptionError(f"{path}: row {line} is not all numbers: {shown(row)}") from None
         times.append(numbers[0])
         volts.append(tuple(numbers[1:]))
     try:

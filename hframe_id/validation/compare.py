@@ -14,6 +14,7 @@ import numpy as np
 from hframe_id.control.declaration import ControllerDeclaration
 from hframe_id.control.loop import check_fits
 from hframe_id.errors import OptionError
+from hframe_id.fitting.dataset import Dataset
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -24,7 +25,7 @@ from hframe_id.validation.inverse_model import InverseModelScore, inverse_model_
 from hframe_id.validation.metrics import fit_percent
 from hframe_id.validation.open_loop_rmse import DEFAULT_INIT_SAMPLES, open_loop_rmse
 from hframe_id.validation.prediction import DEFAULT_HORIZON, DEFAULT_WINDOW, predict_ahead
-from hframe_id.validation.replay import Channels, simulate_channels
+from hframe_id.validation.replay import simulate_channels
 from hframe_id.validation.residuals import (
     DEFAULT_MAX_LAG,
     CorrelationTest,
@@ -128,7 +129,7 @@ class RunResult:
 
     label: str
     params: ParameterSet
-    data: Channels
+    data: Dataset
     simulated: np.ndarray
     predicted: np.ndarray
     channels: tuple[ChannelResult, ...]
@@ -169,7 +170,7 @@ def labels_of(parameter_sets: Sequence[ParameterSet]) -> tuple[str, ...]:
     return tuple(labels)
 
 
-def _channel(run_data: Channels, j: int, simulated, predicted, options) -> ChannelResult:
+def _channel(run_data: Dataset, j: int, simulated, predicted, options) -> ChannelResult:
     valid = run_data.valid[:, j]
     measured = run_data.measured[:, j]
     residual = np.where(valid, measured - simulated[:, j], 0.0)

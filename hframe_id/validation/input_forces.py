@@ -21,10 +21,10 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from hframe_id.fitting.dataset import Dataset
 from hframe_id.models import Model
 from hframe_id.simulation.friction import FrictionOptions, dynamics_function
 from hframe_id.validation.benchmark_filters import ScoreUnavailable, filtered_motion
-from hframe_id.validation.replay import Channels
 
 
 @lru_cache(maxsize=32)
@@ -72,7 +72,7 @@ def input_forces(
     return np.array(produced).T, np.array(predicted).T
 
 
-def measured_motion(model: Model, data: Channels) -> tuple[np.ndarray, np.ndarray]:
+def measured_motion(model: Model, data: Dataset) -> tuple[np.ndarray, np.ndarray]:
     """(x_f (N, n_x), qddot_f (N, n_q)): every coordinate's measured position filtered and
     differentiated as the benchmark does (``benchmark_filters.filtered_motion``).
 

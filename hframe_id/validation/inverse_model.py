@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from hframe_id.fitting.dataset import Dataset
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.simulation.friction import FrictionOptions
@@ -29,7 +30,6 @@ from hframe_id.validation.benchmark_filters import (
     relative_error_percent,
 )
 from hframe_id.validation.input_forces import input_forces, measured_motion
-from hframe_id.validation.replay import Channels
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ class InverseModelScore:
 
 
 def inverse_model_score(
-    params: ParameterSet, data: Channels, friction: FrictionOptions
+    params: ParameterSet, data: Dataset, friction: FrictionOptions
 ) -> InverseModelScore:
     """The IDIM force error of ``params`` on a recording's channels (module docstring)."""
     model = build_model(params.variant)

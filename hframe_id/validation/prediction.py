@@ -31,13 +31,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hframe_id.fitting.problem import output_matrix, state_outputs
+from hframe_id.fitting.dataset import Dataset, state_outputs
+from hframe_id.fitting.problem import output_matrix
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.simulation.compiled import maybe_compile
 from hframe_id.simulation.integrators import rk4_function, stable_substeps
 from hframe_id.simulation.open_loop import outputs_of
-from hframe_id.validation.replay import Channels, measured_positions, measured_rates
+from hframe_id.validation.replay import measured_positions, measured_rates
 
 #: Default window of past samples for the state estimate (the fitter's shooting interval).
 DEFAULT_WINDOW = 10
@@ -67,7 +68,7 @@ def _step_functions(model: Model, n_substeps: int, dt: float) -> tuple[ca.Functi
 class _Windows:
     """All estimation windows of one record: start j = 0 .. W - 1, samples j .. j + m."""
 
-    def __init__(self, model: Model, p: np.ndarray, data: Channels, window: int, n_windows: int):
+    def __init__(self, model: Model, p: np.ndarray, data: Dataset, window: int, n_windows: int):
         self.model, self.p, self.data = model, p, data
         self.m, self.w = window, n_windows
         self.s = np.asarray(model.options.smoothing, dtype=float)
@@ -174,7 +175,7 @@ def estimate_states(windows: _Windows, x_guess: np.ndarray) -> np.ndarray:
     return x0
 
 
-def _state_guess(model: Model, p: np.ndarray, data: Channels, count: int) -> np.ndarray:
+def _state_guess(model: Model, p: np.ndarray, data: Dataset, count: int) -> np.ndarray:
     """(count, n_x) start guesses: measured positions (rigid-motion fill), finite-difference
     velocities, or a rate's measurement where a channel measures it (``measured_rates``)."""
     positions = measured_positions(model, p, data)
@@ -184,7 +185,7 @@ def _state_guess(model: Model, p: np.ndarray, data: Channels, count: int) -> np.
     return np.hstack([positions, velocities])[:count]
 
 
-def initial_state(params: ParameterSet, data: Channels, window: int) -> np.ndarray:
+def initial_state(params: ParameterSet, data: Dataset, window: int) -> np.ndarray:
     """(n_x,) the state at the first sample estimated from samples 0 .. ``window`` alone, as
     each prediction window's state is (output-error least squares, module docstring)."""
     model = build_model(params.variant)
@@ -195,7 +196,7 @@ def initial_state(params: ParameterSet, data: Channels, window: int) -> np.ndarr
 
 def predict_ahead(
     params: ParameterSet,
-    data: Channels,
+    data: Dataset,
     horizon: int = DEFAULT_HORIZON,
     window: int = DEFAULT_WINDOW,
 ) -> np.ndarray:

@@ -1,8 +1,9 @@
 """A recording replayed through a model: measured and simulated outputs on the model's channels.
 
-Inputs are the voltages the plant saw: the commanded ones through the rig's DAC
-(``hframe_id.fitting.experiment.applied_inputs``); the amplifier gains g_i are parameters of the
-model and act inside it. The simulation starts at rest at the first measured positions, as the
+The recording is read on the model's channels as the fitter reads it (``channels``: its
+``hframe_id.fitting.dataset.Dataset``). Inputs are the voltages the plant saw: the commanded
+ones through the rig's DAC; the amplifier gains g_i are parameters of the model and act
+inside it. The simulation starts at rest at the first measured positions, as the
 fitter's first node does for a record with a pre-roll, with the belts unstretched: the
 coordinates are the belt-free (rigid) motion that best fits the first sample's valid
 measurements, weighted by the sensors' noise (so the encoders place the motors, and the cart,
@@ -18,73 +19,23 @@ measure (positions, speeds, a motor current).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from hframe_id.fitting.experiment import applied_inputs, default_channel_std
-from hframe_id.fitting.problem import (
-    REST_SAMPLES,
-    output_kinds,
-    output_matrix,
-    rigid_modes,
-    starts_at_rest,
-    state_outputs,
-)
+from hframe_id.fitting.dataset import REST_SAMPLES, Dataset, state_outputs
+from hframe_id.fitting.problem import output_matrix, rigid_modes
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import outputs_of, simulate
 
 
-@dataclass(frozen=True)
-class Channels:
-    """A recording's data on a model's output channels (model output order, SI).
-
-    Attributes
-    ----------
-    names, units : output names and SI units (``phi1`` [rad], ``x`` [m], ``speed`` [rad/s]).
-    measured : (N, n_y) measurements, NaN where not valid.
-    valid : (N, n_y) True where a sample may be used (``Recording.valid`` and finite).
-    inputs : (N, n_u) voltages the plant saw [V] (after the DAC).
-    input_names : names of the input columns (``u1``, ``u2``).
-    noise_std : (n_y,) sensor noise std from the rig metadata or the model's ``Output``
-        declaration [SI]: weights of the channels in state estimation.
-    kinds : per channel, ``"position"``, ``"rate"`` or ``"other"`` (``output_kinds``).
-    sample_period_s : sample period [s].
-    """
-
-    names: tuple[str, ...]
-    units: tuple[str, ...]
-    measured: np.ndarray
-    valid: np.ndarray
-    inputs: np.ndarray
-    input_names: tuple[str, ...]
-    noise_std: np.ndarray
-    sample_period_s: float
-    kinds: tuple[str, ...] = ()
+def channels(model: Model, recording: Recording) -> Dataset:
+    """The recording on ``model``'s channels (``Dataset.from_recording``; checked by
+    ``checks.check_signals``)."""
+    return Dataset.from_recording(model, recording)
 
 
-def channels(model: Model, recording: Recording) -> Channels:
-    """The recording's measurements on ``model``'s outputs (checked by ``checks.check_signals``)."""
-    names = tuple(s.name for s in model.outputs)
-    columns = [list(recording.output_names).index(name) for name in names]
-    measured = np.asarray(recording.outputs, dtype=float)[:, columns]
-    valid = np.asarray(recording.valid, dtype=bool)[:, columns] & np.isfinite(measured)
-    return Channels(
-        names=names,
-        units=tuple(s.unit for s in model.outputs),
-        measured=np.where(valid, measured, np.nan),
-        valid=valid,
-        inputs=applied_inputs(recording),
-        input_names=tuple(s.name for s in model.inputs),
-        noise_std=np.array([default_channel_std(recording, name, model) for name in names]),
-        sample_period_s=float(recording.sample_period_s),
-        kinds=output_kinds(model),
-    )
-
-
-def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
+def measured_positions(model: Model, p: np.ndarray, data: Dataset) -> np.ndarray:
     """(N, n_q) belt-free coordinates [m or rad] at every sample from the measurements alone.
 
     Per sample, the amplitudes of the rigid (belt-free) motions are fitted to the valid
@@ -115,15 +66,7 @@ def measured_positions(model: Model, p: np.ndarray, data: Channels) -> np.ndarra
     return positions
 
 
-def shows_rest(data: Channels) -> bool:
-    """Whether the record shows rest over its first ``REST_SAMPLES``
-    (``fitting.problem.starts_at_rest`` with the sensors' noise)."""
-    return starts_at_rest(
-        data.measured, data.valid, data.noise_std, REST_SAMPLES, data.sample_period_s, data.kinds
-    )
-
-
-def measured_rates(model: Model, data: Channels) -> np.ndarray:
+def measured_rates(model: Model, data: Dataset) -> np.ndarray:
     """(N, n_q) the coordinates' rates the channels measure (a tachometer) [SI], NaN where no
     valid sample of a rate channel gives one."""
     nq = model.n_states // 2
@@ -134,13 +77,13 @@ def measured_rates(model: Model, data: Channels) -> np.ndarray:
     return rates
 
 
-def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
+def rest_state(model: Model, p: np.ndarray, data: Dataset) -> np.ndarray:
     """(n_x,) state at rest (velocities zero, belts unstretched) at the measured positions:
     the mean over the first ``REST_SAMPLES`` where the record shows rest there
-    (``shows_rest``; a laser's noise averaged down by sqrt(10)), else the first sample's. A
+    (``Dataset.at_rest``; a laser's noise averaged down by sqrt(10)), else the first sample's. A
     rate a channel measures (a tachometer, ``measured_rates``) starts at its measurement,
     averaged the same way (zero within its noise at rest)."""
-    rest = shows_rest(data)
+    rest = data.at_rest
     nq = model.n_states // 2
     positions = measured_positions(model, p, data)
     x0 = np.zeros(model.n_states)
@@ -153,13 +96,13 @@ def rest_state(model: Model, p: np.ndarray, data: Channels) -> np.ndarray:
 
 def simulate_channels(
     params: ParameterSet, recording: Recording, x0: np.ndarray | None = None
-) -> tuple[Channels, np.ndarray]:
+) -> tuple[Dataset, np.ndarray]:
     """The recording's channels for ``params``'s model and their open-loop simulation, from
     ``x0`` (default: ``rest_state``).
 
     Returns
     -------
-    data : the measured channels (``Channels``).
+    data : the measured channels (``Dataset``).
     simulated : (N, n_y) simulated outputs [SI] at the sample instants, from rest at the
         first measured positions under the recording's DAC voltages (zero-order hold).
     """

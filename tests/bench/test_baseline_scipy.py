@@ -128,6 +128,16 @@ def test_bad_input_is_a_clear_error(recordings, truth):
     )
     with pytest.raises(FitError, match="laser_noise_std_m"):
         fit_single_shooting([no_laser], truth)
+    # The recording is read on the model's channels (its Dataset): a missing output is
+    # refused, not fitted without.
+    no_y = dataclasses.replace(
+        recordings[0],
+        outputs=recordings[0].outputs[:, :3],
+        valid=recordings[0].valid[:, :3],
+        output_names=recordings[0].output_names[:3],
+    )
+    with pytest.raises(FitError, match="no output 'y'"):
+        fit_single_shooting([no_y], truth)
     jittered = dataclasses.replace(recordings[0], time_s=recordings[0].time_s * 1.01)
     with pytest.raises(FitError, match="sample period|uniformly"):
         fit_single_shooting([jittered], truth)

@@ -93,3 +93,39 @@ def test_a_file_hanging_at_import_times_out(tmp_path, code):
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("hframe-id: error: model file"), done.stderr
     assert str(model) in lines[0] and "still running after 0.5 s" in lines[0]
+
+
+@pytest.mark.parametrize(
+    "code",
+    [
+        "import time\nwhile True:\n    try:\n        time.sleep(300)\n    except BaseException:\n"
+        "        pass\n",
+        "import signal\nsignal.signal(signal.SIGALRM, signal.SIG_IGN)\nwhile True:\n    pass\n",
+        "import signal, time\nsignal.setitimer(signal.ITIMER_REAL, 0)\ntime.sleep(300)\n",
+    ],
+    ids=["swallows-every-exception", "ignores-sigalrm", "stops-the-timer"],
+)
+def test_a_file_defeating_the_load_timer_still_ends(tmp_path, code):
+    """A file that defeats the timer (catches its exception in a loop, ignores SIGALRM,
+    stops the timer) used to hang the command for ever: it ends LOAD_GRACE_S later."""
+    model = tmp_path / "stubborn.py"
+    model.write_text(code)
+    env = {**os.environ, "HFRAME_ID_LOAD_TIMEOUT": "0.5"}
+    done = subprocess.run(
+        [sys.executable, "-m", "hframe_id", "models", "--model-file", str(model)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "still running after 0.5 s" in lines[0], done.stderr
+
+
+def test_a_file_raising_generator_exit_is_one_line(tmp_path, capsys):
+    """GeneratorExit is a BaseException that is neither SystemExit nor KeyboardInterrupt: it
+    was a traceback."""
+    model = tmp_path / "odd.py"
+    model.write_text("raise GeneratorExit\n")
+    refused(["models", "--model-file", model], capsys, model, "GeneratorExit (line 1)")

@@ -6,6 +6,7 @@ the file (and the field or line), exit status 2, no traceback, nothing written."
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from hframe_id.errors import MAX_SHOWN
 ROOT = Path(__file__).resolve().parents[2]
 H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
 REC = ROOT / "datasets" / "4V_xmotion.mcap"
+PLANT = ROOT / "datasets" / "realistic" / "plants" / "hframe-realistic.yaml"
 SAMPLE_TOPIC = "/rig/sample"
 
 
@@ -29,9 +31,11 @@ def _parameter_file(path: Path, edit: Callable[[str], str]) -> Path:
     return path
 
 
-def _recording(path: Path, payload: Callable[[int, dict], bytes | dict]) -> Path:
+def _recording(
+    path: Path, payload: Callable[[int, dict], bytes | dict], rig: dict | None = None
+) -> Path:
     """4V_xmotion.mcap with each sample message ``i`` replaced by ``payload(i, message)``
-    (bytes as they are, a dict as JSON)."""
+    (bytes as they are, a dict as JSON) and the ``rig`` metadata updated with ``rig``."""
     with REC.open("rb") as source, path.open("wb") as out:
         reader = make_reader(source)
         summary = reader.get_summary()
@@ -48,7 +52,8 @@ def _recording(path: Path, payload: Callable[[int, dict], bytes | dict]) -> Path
             for i, c in summary.channels.items()
         }
         for record in reader.iter_metadata():
-            writer.add_metadata(record.name, record.metadata)
+            changes = rig if record.name == "rig" and rig else {}
+            writer.add_metadata(record.name, {**record.metadata, **changes})
         for attachment in reader.iter_attachments():
             writer.add_attachment(
                 attachment.log_time,
@@ -187,3 +192,70 @@ def test_a_number_beyond_any_float(work, capsys):
     path = _recording(work / "big.mcap", lambda i, m: {**m, "u1_V": 10**400} if i == 2 else m)
     line = refused(["inspect", path], capsys, path, "sample 2: u1_V must be a number")
     assert "..." in line
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["params", "show", "{p}"], ["linearize", "{p}"], ["simulate", "--plant", "{p}"]],
+    ids=["params-show", "linearize", "plant"],
+)
+def test_an_integer_beyond_any_float_in_yaml(work, capsys, argv):
+    """1 and 400 zeros: refused by the loader with its line, not an OverflowError where a
+    value is turned into a float."""
+    source = PLANT if argv[0] == "simulate" else H8
+    path = work / "big.yaml"
+    path.write_text(source.read_text().replace(": 0.0194", ": 1" + "0" * 400))
+    argv = [word.replace("{p}", str(path)) for word in argv]
+    if argv[0] == "simulate":
+        argv += ["--step", "1,4", "--duration", "0.05", "--out", "s.csv"]
+    refused(argv, capsys, path, "integer of 401 digits", "line ")
+    assert _listing(work) == {"big.yaml"}
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "problem"),
+    [
+        ("encoder_counts_per_rev", "0", "must be a number >= 1, got 0"),
+        ("laser_noise_std_m", "nan", "must be a number >= 0, got nan"),
+        ("dac_min_v", "20", "must be a number below rig.dac_max_v"),
+    ],
+)
+def test_rig_metadata_out_of_range(work, capsys, key, value, problem):
+    """A recording's numeric rig metadata are range-checked when it is read (0 counts per
+    revolution was a ZeroDivisionError traceback in the fitter)."""
+    path = _recording(work / "rig.mcap", lambda i, m: m, rig={key: value})
+    refused(["fit", path, "--out-dir", "fits"], capsys, path, f"rig.{key}", problem)
+    assert _listing(work) == {"rig.mcap"}
+
+
+def test_a_named_pipe_without_writer_is_not_waited_on(work, capsys):
+    """A FIFO given as a parameter file used to block the command forever."""
+    os.mkfifo(work / "pipe.yaml")
+    refused(["params", "show", work / "pipe.yaml"], capsys, "pipe.yaml")
+
+
+def test_a_huge_csv_header_is_echoed_shortened(work, capsys):
+    """The voltage CSV's header was echoed whole (a 100 000-column header: a 690 kB error
+    line); every message is now bounded, whichever value it shows."""
+    path = work / "wide.csv"
+    path.write_text("time [s]," + ",".join(f"c{i}" for i in range(100_000)) + "\n")
+    argv = ["simulate", "--params", H8, "--csv", path, "--out", "s.csv"]
+    line = refused(argv, capsys, path, "header must be")
+    assert "..." in line
+    assert _listing(work) == {"wide.csv"}
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["inspect", "/dev/zero"],
+        ["params", "show", "/dev/zero"],
+        ["simulate", "--params", H8, "--csv", "/dev/zero", "--out", "s.csv"],
+    ],
+    ids=["recording", "parameter-file", "voltage-csv"],
+)
+def test_a_device_as_input_is_refused_before_reading(work, capsys, argv):
+    """/dev/zero never ends: a recording or voltage CSV was read whole until memory ran
+    out (a MemoryError traceback)."""
+    refused(argv, capsys, "/dev/zero", "a device, not a file")
+    assert _listing(work) == set()

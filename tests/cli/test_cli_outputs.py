@@ -6,6 +6,10 @@ line naming the option and the path, exit status 2, no traceback and nothing lef
 from __future__ import annotations
 
 import datetime as dt
+import os
+import stat
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -189,3 +193,65 @@ def test_batch_outputs_checked_before_any_fit(work, capsys, option, value, probl
     before = _listing(work)
     refused(argv, capsys, option, value, problem)
     assert _listing(work) == before
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["export", H8, "--format", "json", "--out", "pipe", "--force"],
+        ["simulate", "--params", H8, *STEP, "--out", "pipe", "--force"],
+        ["control", "--params", H8, "--kp", "150", "--csv", "pipe", "--force"],
+    ],
+    ids=["export", "simulate", "control"],
+)
+def test_force_never_replaces_a_device_or_pipe(work, capsys, argv):
+    """An output is put in place by a rename: onto a pipe or a device (as root, --out
+    /dev/null) it would replace the node itself."""
+    os.mkfifo(work / "pipe")
+    refused(argv, capsys, "pipe", "device, pipe or socket")
+    assert stat.S_ISFIFO((work / "pipe").lstat().st_mode)
+    assert sorted(_listing(work)) == ["afile", "pipe"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["record", "--rig", "sim", "--params", H8, "--fast", "--quiet", "--out", "new/"],
+        ["simulate", "--params", H8, *STEP, "--out", "new/"],
+        ["export", H8, "--format", "json", "--out", ""],
+    ],
+    ids=["record-slash", "simulate-slash", "export-empty"],
+)
+def test_an_output_file_needs_a_file_name(work, capsys, argv):
+    """'new/' names a folder (Path would drop the slash and write a file 'new'); an empty
+    --out is no file (export used to print to standard output)."""
+    refused(argv, capsys, "a file's path is needed")
+    assert sorted(_listing(work)) == ["afile"]
+
+
+def test_inspect_plot_is_a_png_whatever_its_name(work, capsys):
+    assert main(["inspect", str(REC), "--plot", "figure.out"]) == 0
+    assert (work / "figure.out").read_bytes().startswith(b"\x89PNG")
+
+
+def test_standard_output_on_a_full_disk_is_one_line(tmp_path):
+    """Printing to a full device: one error line and exit status 2, not a traceback (nor
+    Python's complaint at exit)."""
+    with open("/dev/full", "wb") as full:
+        done = subprocess.run(
+            [sys.executable, "-m", "hframe_id", "models"],
+            stdout=full,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=60,
+        )
+    assert done.returncode == 2
+    assert done.stderr == "hframe-id: error: standard output: No space left on device\n"
+
+
+def test_a_path_too_long_for_the_file_system_is_one_line(work, capsys):
+    """A 300-character file name: the output guard's checks raise ENAMETOOLONG, which was a
+    traceback; the line shows the path shortened and the problem."""
+    name = "a" * 300
+    refused(["export", H8, "--format", "json", "--out", name], capsys, "File name too long")
+    assert sorted(_listing(work)) == ["afile"]

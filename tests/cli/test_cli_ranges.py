@@ -29,6 +29,8 @@ def work(tmp_path, monkeypatch) -> Path:
         (["--protocol", "pulse", "--amplitude", "1", "--width", "0"], "--width", "0"),
         (["--protocol", "multisine", "--rms", "-1"], "--rms", "-1"),
         (["--protocol", "multisine", "--rms", "nan"], "--rms", "nan"),
+        (["--protocol", "multisine", "--band", "0.5", "5000"], "--band", "Nyquist frequency 500"),
+        (["--protocol", "multisine", "--duration", "0.1"], "--duration", "one --period 2 s"),
     ],
 )
 def test_record_option_out_of_range(work, capsys, extra, option, value):
@@ -77,9 +79,20 @@ def test_recording_sample_period_against_the_device_clock(work, capsys):
     assert sorted(p.name for p in work.iterdir()) == ["clock.mcap"]
 
 
-def test_validate_max_lag_longer_than_the_recording(work, capsys):
-    argv = ["validate", H8, REC, "--max-lag", "100000", "--plot", "plots"]
-    refused(argv, capsys, "--max-lag", "100000", "1000 samples")
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [
+        (["--max-lag", "100000"], "--max-lag 100000"),
+        (["--horizon", "100000"], "--window + --horizon 100010"),
+        (["--window", "995"], "--window + --horizon 1005"),
+        (["--init-samples", "5000"], "--init-samples 5000"),
+    ],
+)
+def test_validate_spans_longer_than_the_recording(work, capsys, options, named):
+    """Every option counted in samples is checked against the recording's length (the
+    horizon, window and RMSE start were accepted, and gave empty or NaN scores)."""
+    argv = ["validate", H8, REC, *options, "--plot", "plots"]
+    refused(argv, capsys, named, "1000 samples")
     assert list(work.iterdir()) == []
 
 
@@ -137,6 +150,13 @@ OUT_OF_RANGE = [
     ([*CONTROL, "--kp", "1"], "--substeps", "0"),
     ([*FLEET_MAKE, "--weeks", "2"], "--rigs", "0"),
     ([*FLEET_MAKE, "--rigs", "1"], "--weeks", "1"),
+    ([*FLEET_MAKE, "--rigs", "100000"], "--weeks", "100000"),
+    (["batch", "m.yaml", "--results", "r.parquet"], "--workers", "100000"),
+    (
+        ["design", "--params", H8, "--duration", "1", "--max-voltage", "2", "--out", "d.csv"],
+        "--draws",
+        "100000",
+    ),
     ([*FLEET_MAKE, "--rigs", "1", "--weeks", "2"], "--seed", "-1"),
     (["fleet", "report", "r.parquet"], "--threshold", "1"),
     (["batch", "m.yaml", "--results", "r.parquet"], "--workers", "0"),
@@ -153,3 +173,23 @@ def test_numeric_option_out_of_range_of_fit_control_fleet_batch(work, capsys, ar
 def test_control_workspace_must_be_finite(work, capsys):
     argv = [*CONTROL, "--kp", "1", "--workspace", "-0.1", "inf", "-0.1", "0.1"]
     refused(argv, capsys, "--workspace", "inf")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--params", H8, "--step", "1,4", "--duration", "0.05", "--out", "s.csv"],
+        ["control", "--params", H8, "--kp", "150", "--csv", "c.csv"],
+    ],
+    ids=["simulate", "control"],
+)
+def test_substeps_bounded_above(work, capsys, argv):
+    """--substeps 100000000 on 50 samples ran for minutes."""
+    refused([*argv, "--substeps", "100000000"], capsys, "--substeps", "<= 10000")
+    assert list(work.iterdir()) == []
+
+
+def test_fit_empty_free_list(work, capsys):
+    """--free '' fitted the default free set as if no --free were given."""
+    refused(["fit", REC, "--out-dir", "fits", "--free", ""], capsys, "free")
+    assert list(work.iterdir()) == []

@@ -252,3 +252,68 @@ def test_batch_with_an_unwritable_out_dir_is_one_line_before_any_work(tmp_path, 
     argv = ["batch", _manifest(tmp_path), "--results", tmp_path / "r.parquet", "--out-dir", out]
     refused(argv, capsys, "--out-dir", out)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "manifest.yaml"]
+
+
+def test_ctrl_c_while_the_command_module_is_imported(monkeypatch, capsys):
+    """Ctrl-C in the first tenth of a second (the command's module being imported) was a
+    KeyboardInterrupt traceback: the parser is now built under the signal handling too."""
+
+    def interrupted(name):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("hframe_id.cli.importlib.import_module", interrupted)
+    assert main(["fit", "x.mcap"]) == signals.EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "hframe-id: interrupted (Ctrl-C)\n"
+
+
+def test_fit_interrupted_while_reporting_leaves_no_parameter_file(tmp_path, monkeypatch, capsys):
+    """The parameter file is written before the report: Ctrl-C during the report left it
+    behind (exit 130 with an output in place)."""
+
+    def interrupted(*args, **kwargs):
+        raise signals.Interrupted("SIGINT received")
+
+    monkeypatch.setattr("hframe_id.fitting.report.write_report", interrupted)
+    monkeypatch.chdir(tmp_path)
+    rec = ROOT / "datasets" / "4V_xmotion.mcap"
+    argv = ["fit", rec, "--quiet", "--no-plots", "--max-iterations", "1", "--out-dir", "fits"]
+    assert main([str(word) for word in argv]) == signals.EXIT_INTERRUPTED
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_figure_worker_whose_command_is_gone_ends_quietly():
+    """A worker answering after the command closed its pipe (interrupted) ended with a
+    traceback ("Process hframe-id figures:") under the command's line."""
+    import multiprocessing
+
+    from hframe_id.figure_drawers import _answer
+
+    command, worker = multiprocessing.Pipe()
+    command.send((len, ([],)))
+    command.close()
+    _answer(worker)  # the answer finds the pipe closed: returns, raises nothing
+
+
+def test_a_long_import_says_so_unless_quiet(tmp_path, capsys, monkeypatch):
+    """A log of millions of rows took 50 s to import with nothing on stderr (and a Ctrl-C
+    during its CSV parsing took 7 s to act: parsed row by row now)."""
+    from hframe_id.recordings import importer
+
+    imported = importer.import_recording
+
+    def slow(*args, **kwargs):
+        time.sleep(0.5)  # past the announcement below, whatever the machine's load
+        return imported(*args, **kwargs)
+
+    monkeypatch.setattr(importer, "import_recording", slow)
+    monkeypatch.setattr(progress, "ANNOUNCE_AFTER_S", 0.05)
+    log = tmp_path / "log.csv"
+    log.write_text("t,u,x\n" + "".join(f"{k * 0.001},1,0\n" for k in range(10)))
+    argv = ["import", str(log), "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
+    argv += ["--variant", "a", "--out", str(tmp_path / "log.mcap")]
+    assert main(argv) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == f"importing {log} ..."
+    assert lines[1].startswith(f"importing {log}: done in ")
+    assert main([*argv, "--force", "--quiet"]) == 0
+    assert "importing" not in capsys.readouterr().err

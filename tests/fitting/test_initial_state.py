@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.dataset import starts_at_rest
 from hframe_id.fitting.experiment import default_channel_std
 from hframe_id.fitting.known_points import simulation_criterion
-from hframe_id.fitting.problem import build_problem, starts_at_rest
+from hframe_id.fitting.problem import build_problem
 from hframe_id.models import build_model
 from hframe_id.validation.replay import channels, rest_state
 

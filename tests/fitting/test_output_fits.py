@@ -11,8 +11,9 @@ from servo_outputs import NOISE, TRUTH, servo_model_file, servo_recording, start
 
 from hframe_id.errors import FitError, OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.dataset import output_kinds, starts_at_rest
 from hframe_id.fitting.experiment import default_channel_std
-from hframe_id.fitting.problem import build_problem, output_kinds, starts_at_rest
+from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.models import build_model
 
