@@ -4,7 +4,8 @@
     python -m studies.fit_stages 10            # a drawn plant, by its seed
 
 Prints each stage (name, iterations, wall time [s], converged, cost), the verdict, where the
-fit started and the known points' criteria, the noise levels the fit weighed with [SI] and the fitted values [SI], as JSON lines for comparisons.
+fit started and the known points' criteria, the noise levels the fit weighed with [SI] and
+the fitted values [SI], as JSON lines for comparisons.
 """
 
 from __future__ import annotations
