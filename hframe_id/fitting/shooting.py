@@ -136,7 +136,7 @@ class MultipleShooting(ShootingNodes):
         )
         self.window_index_in_experiment = self.window_start // m
         #: (W, n_x) True for the node entries that are known, not estimated: the velocities
-        #: of an experiment's first node where the record starts at rest (``Experiment.at_rest``)
+        #: of an experiment's first node where the record starts at rest (``Dataset.at_rest``)
         self.fixed_node = np.zeros((len(exp_of), self.nx), dtype=bool)
         self.fixed_node[:, self.nq :] = np.array(
             [

@@ -107,7 +107,7 @@ class ShootingNodes:
                 continue
             if not known[idx[0]]:
                 # The first node as given: measured positions, and no speed for a record at
-                # rest (``Experiment.at_rest``), the measured rates for one in motion.
+                # rest (``Dataset.at_rest``), the measured rates for one in motion.
                 if exp.at_rest:
                     nodes[idx[0], self.nq :] = 0.0
                 known[idx[0]] = True
