@@ -48,11 +48,12 @@ def main(argv: list[str] | None = None) -> int:
             f"converged={s.converged} cost={s.cost:.6g}"
         )
     print(f"{'success' if result.success else 'FAILED'}: {result.message}")
-    print(f"wall {wall:.1f} s, noise rounds {result.diagnostics['noise']['rounds']}")
+    print(f"wall {wall:.1f} s, noise rounds {result.diagnostics.noise.rounds}")
     print(f"first stage: {result.stages[0].message}")
-    print(f"known points: {json.dumps(result.diagnostics.get('known_points'))}")
-    channels = result.diagnostics["noise"]["channels"]
-    print(json.dumps({name: c["weight_std"] for name, c in channels.items()}))
+    known = result.diagnostics.known_points
+    print(f"known points: {json.dumps(known.criteria if known else None)}")
+    channels = result.diagnostics.noise.channels
+    print(json.dumps({name: c.weight_std for name, c in channels.items()}))
     print(json.dumps(result.parameters.values))
     return 0
 

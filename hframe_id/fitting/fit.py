@@ -27,6 +27,7 @@ from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import (
     Criterion,
+    KnownPointsReport,
     candidate_thetas,
     judged_starts,
     known_points,
@@ -93,7 +94,7 @@ def fit_recordings(
 def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
     """The fit from ``initial`` and from ``options.starts - 1`` seeded draws around it
     (``multistart``), one after another; the best successful one by its file's criterion
-    (the first's if none succeeded), with every start's outcome in ``diagnostics["starts"]``."""
+    (the first's if none succeeded), with every start's outcome in ``diagnostics.starts``."""
     progress = progress_sink(options)
     first = _fit_widening(recordings, initial, options)
     problem = first.problem
@@ -112,9 +113,7 @@ def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitRes
         results.append((label, _started_from(_fit_widening(recordings, start, named), initial)))
     outcomes = judged(results, Criterion.of(first, recordings))
     k = min(range(len(outcomes)), key=lambda i: outcomes[i].criterion)
-    best = results[k][1]
-    best.diagnostics["starts"] = outcomes
-    return best
+    return results[k][1].with_diagnostics(starts=tuple(outcomes))
 
 
 def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
@@ -127,12 +126,12 @@ def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> Fit
     with F_c_bridge on the box, 1.53 x the reduction's training cost, in 77 s against 36 s.)"""
     for _ in range(BOX_WIDENINGS):
         result = fit_in_box(recordings, initial, options, may_widen=True)
-        boxed = result.diagnostics["at_default_box"]
+        boxed = result.diagnostics.at_default_box
         if not boxed:
             return result
         options = _widened(options, result, boxed)
     result = fit_in_box(recordings, initial, options)
-    boxed = result.diagnostics["at_default_box"]
+    boxed = result.diagnostics.at_default_box
     if not (boxed and result.success):
         return result
     ends = open_ends(result, recordings, boxed)
@@ -245,9 +244,7 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
     points = known_points(candidates, criterion, starts)
-    report = {"fit": own, **{p.label: p.criterion for p in points}}
-    result.diagnostics["known_points_criterion"] = criterion.name
-    result.diagnostics["known_points"] = report
+    report = KnownPointsReport(criterion.name, own, {p.label: p.criterion for p in points})
     # Differences under LIKELIHOOD_RATIO_95 are not significant at 95 %: such a point is not
     # better, and a continued fit that ends there has reached it.
     tried = (
@@ -258,15 +255,14 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     for point in tried:
         again = _started_from(_fit_widening(recordings, point.parameters, options), initial)
         continued = criterion(again.parameters, judged_starts(again)) if again.success else math.inf
-        report[f"fit continued from {point.label}"] = continued
+        report = replace(report, continued={**report.continued, point.label: continued})
         if continued <= min(point.criterion, own) + LIKELIHOOD_RATIO_95:
-            again.diagnostics["known_points"] = report
-            again.diagnostics["known_points_criterion"] = criterion.name
             why = "failed" if not result.success else "ended worse"
             return replace(
-                again,
+                again.with_diagnostics(known_points=report),
                 message=f"{again.message}; continued from {point.label}, where the first fit {why}",
             )
+    result = result.with_diagnostics(known_points=report)
     if not tried:
         return result
     if not result.success:
@@ -278,7 +274,7 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
             + " failed or ended worse than it",
         )
     best = tried[0]
-    continued = report[f"fit continued from {best.label}"]
+    continued = report.continued[best.label]
     return replace(
         result,
         success=False,

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +65,34 @@ class KnownPoint:
     label: str
     parameters: ParameterSet
     criterion: float  # C(p) (``Criterion``); inf where the simulation fails
+
+
+@dataclass(frozen=True)
+class KnownPointsReport:
+    """A fit judged against the points it knows, by the criterion ``criterion`` names
+    (``Criterion.name``); every number is that criterion, C(p) of the module docstring
+    (dimensionless: chi^2 / 2 units, or the concentrated criterion's), inf where the
+    simulation failed. ``fit``: the fit's own; ``points``: each known point's by its label,
+    best first; ``continued``: by the label of the point it started from, each fit continued
+    from a point (inf for one that failed), in the order they were tried."""
+
+    criterion: str
+    fit: float
+    points: dict[str, float]
+    continued: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def compared(self) -> dict[str, float]:
+        """What the fit was compared with, by label: the known points, then the fits continued
+        from them (``"fit continued from <label>"``)."""
+        continued = {f"fit continued from {k}": v for k, v in self.continued.items()}
+        return {**self.points, **continued}
+
+    @property
+    def criteria(self) -> dict[str, float]:
+        """Every number by label, the fit's as ``"fit"`` first, then ``compared`` (the
+        ``known_points`` of ``hframe-id fit --json``)."""
+        return {"fit": self.fit, **self.compared}
 
 
 def simulation_criterion(
@@ -152,11 +180,11 @@ class Criterion:
     @classmethod
     def of(cls, result, recordings: Sequence[Recording]) -> Criterion:
         """The criterion of a ``FitResult``'s written file."""
-        noise = result.diagnostics.get("noise") or {}
-        concentrated = noise.get("method") == "estimated"
-        std = dict(result.diagnostics["channel_std"])
+        noise = result.diagnostics.noise
+        concentrated = noise is not None and noise.method == "estimated"
+        std = dict(result.diagnostics.channel_std)
         if concentrated:
-            std = {name: channel["sensor_std"] for name, channel in noise["channels"].items()}
+            std = {name: channel.sensor_std for name, channel in noise.channels.items()}
         return cls(tuple(recordings), std, dict(result.options.latency_samples), concentrated)
 
     def __call__(self, params: ParameterSet, starts=None) -> float:

@@ -64,7 +64,7 @@ def test_a_record_at_rest_starts_at_rest(table, step):
     assert np.all(result.initial_states[0][4:] == 0.0)
     resolution = np.array([1.96e-5, 1.96e-5, 5e-6, 5e-6])  # encoder step, laser std
     assert np.all(np.abs(result.initial_states[0][:4] - rest[:4]) < resolution)
-    std = dict(result.diagnostics["channel_std"])
+    std = dict(result.diagnostics.channel_std)
     replayed = simulation_criterion(result.parameters, [step], std, None, result.initial_states)
     # The same RK4 (substeps from the same parameters): equal to the defects left (1e-2 std).
     assert replayed == pytest.approx(result.cost, rel=1e-4)

@@ -20,13 +20,12 @@ def test_the_models_reference_files_are_known_points():
 def test_the_fit_is_compared_with_what_it_knows(table, truth, steps):
     result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
     assert result.success, result.message
-    points = result.diagnostics["known_points"]
-    assert {"fit", "the start", "the equation-error estimate", "hframe-8-table4.1.yaml"} <= set(
-        points
-    )
+    report = result.diagnostics.known_points
+    points = report.points
+    assert {"the start", "the equation-error estimate", "hframe-8-table4.1.yaml"} <= set(points)
     assert any(label.startswith("known point 1") for label in points)
     # Matched data: the fit is the best of them, its truth included.
-    assert points["fit"] == min(points.values())
+    assert report.fit <= min(report.compared.values())
     assert "the best known point" in result.summary()
 
 
@@ -57,9 +56,9 @@ def test_a_fit_worse_than_a_known_point_continues_from_it(monkeypatch, table, tr
     assert len(calls) == 2
     assert result.success, result.message
     assert "continued from" in result.message
-    points = result.diagnostics["known_points"]
-    continued = next(v for k, v in points.items() if k.startswith("fit continued"))
-    assert continued <= min(v for k, v in points.items() if k not in ("fit",))
+    report = result.diagnostics.known_points
+    continued = next(iter(report.continued.values()))
+    assert continued <= min(report.compared.values())
 
 
 def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps):
@@ -70,7 +69,7 @@ def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps
     result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
     assert not result.success
     assert "the fit ends worse than" in result.message
-    std = dict(result.diagnostics["channel_std"])
+    std = dict(result.diagnostics.channel_std)
     assert simulation_criterion(table, steps, std) > simulation_criterion(truth, steps, std)
 
 
@@ -96,7 +95,7 @@ def test_a_given_bound_is_the_users_decision(table, steps):
     result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
     assert result.success, result.message
     assert result.estimates["k_l"].at_bound
-    assert result.diagnostics["at_default_box"] == ()
+    assert result.diagnostics.at_default_box == ()
 
 
 def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, steps, truth):
@@ -111,8 +110,8 @@ def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, ste
     assert "where the first fit failed" in result.message
     assert result.parameters.values["k_l"] == pytest.approx(truth.values["k_l"], rel=1e-3)
     assert result.initial is start
-    points = result.diagnostics["known_points"]
-    assert points["fit"] > points["known point 1 (H-frame 8th-order model, nonlinear friction)"]
+    report = result.diagnostics.known_points
+    assert report.fit > report.points["known point 1 (H-frame 8th-order model, nonlinear friction)"]
 
 
 def _squares_and_counts(params, recordings):
