@@ -32,7 +32,7 @@ def run_seed(noise_seed: int) -> tuple[dict, dict, bool]:
     initial = load_parameter_file(TABLE_4_2)
     options = FitOptions()
     result = fit_recordings(recordings, initial, options)
-    table = leave_one_out(recordings, result.parameters, options)  # as ``hframe-id fit`` does
+    table = leave_one_out(recordings, initial, options)
     result = with_jackknife_intervals(result, table)
     own, jackknife = {}, {}
     for name, est in result.estimates.items():

@@ -394,10 +394,8 @@ def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path
 def _cross_validate(
     recordings: list[Recording], initial: ParameterSet, options: FitOptions, quiet: bool
 ) -> LeaveOneOutTable | None:
-    """Leave-one-recording-out refits with the fit's options, each started from ``initial``
-    (the all-recordings fit: the jackknife asks how far its optimum moves without one
-    recording, not where another start would end), a line per fold on stderr; None (with a
-    warning) if a refit raises: the fit is kept without its cross-validation."""
+    """Leave-one-recording-out refits with the fit's options, a line per fold on stderr; None
+    (with a warning) if a refit raises: the fit is kept without its cross-validation."""
     from hframe_id.validation.cross_validation import leave_one_out
 
     def announce(fold: int, folds: int, held_out: str) -> None:
@@ -560,7 +558,7 @@ def run(args: argparse.Namespace) -> int:
         result = fit_recordings(recordings, initial, options)
         cross_validation = None
         if result.success and len(recordings) > 1 and not args.no_cross_validation:
-            cross_validation = _cross_validate(recordings, result.parameters, options, args.quiet)
+            cross_validation = _cross_validate(recordings, initial, options, args.quiet)
             if cross_validation is not None:
                 from hframe_id.fitting.jackknife import with_jackknife_intervals
 
