@@ -162,15 +162,15 @@ def _run_fitter(fitter, recordings, start) -> dict:
         }
     elapsed = time.perf_counter() - t0
     estimates = {n: float(e.estimate) for n, e in result.estimates.items() if e.free}
-    noise = result.diagnostics.get("noise", {})
+    noise = result.diagnostics.noise
     return {
         "time": elapsed,
         "ok": bool(result.success),
         "message": result.message,
         "estimates": estimates,
         "iterations": getattr(result, "iterations", "?"),
-        "channel_rms": dict(result.diagnostics.get("channel_rms", {})),
-        "noise": f"{noise.get('method', '?')}, {noise.get('rounds', '?')} rounds",
+        "channel_rms": dict(result.diagnostics.channel_rms),
+        "noise": f"{noise.method}, {noise.rounds} rounds",
     }
 
 

@@ -52,7 +52,7 @@ def fit_row(recording, published, continuity: str, horizon: int) -> str:
         )
     data, simulated = simulate_channels(result.parameters, recording)
     simulation = fit_percent(data.measured[:, 0], simulated[:, 0], data.valid[:, 0])
-    rms = result.diagnostics.get("channel_rms", {}).get("qm", float("nan"))
+    rms = result.diagnostics.channel_rms.get("qm", float("nan"))
     label = f"{continuity:>5} H={horizon:>5}"
     status = "ok" if result.success else f"FAILED ({result.message})"
     return (

@@ -103,11 +103,11 @@ def run_trial(
         train="pulses",
         success=result.success,
         message=result.message,
-        max_defect=float(result.diagnostics["max_defect"]),
+        max_defect=float(result.stages[-1].max_defect),
         wall_time_s=wall,
         held_out_fit={n: simulation_fit(result.parameters, r) for n, r in held_out.items()},
         reference_fit={n: simulation_fit(own, r) for n, r in held_out.items()},
-        channel_rms=dict(result.diagnostics["channel_rms"]),
+        channel_rms=dict(result.diagnostics.channel_rms),
         estimates={
             name: (est.estimate, *est.ci95) for name, est in result.estimates.items() if est.free
         },

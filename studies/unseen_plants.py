@@ -10,7 +10,7 @@ the default ``FitOptions()``, then two checks against the plant's own section-4.
 (``simulate_channels``):
 
 - training: cost(P) = 0.5 sum_recordings sum_j sum_k (r_jk / sigma_j)^2, sigma_j the fit's
-  noise level per channel (``diagnostics["channel_std"]``); passes if cost(fit) <= 1.05
+  noise level per channel (``diagnostics.channel_std``); passes if cost(fit) <= 1.05
   cost(reduction): the fit found an optimum at least as good as the truth's (mismatch's
   log-form ``training_criterion`` is reported beside it);
 - held-out: the motor-angle (phi1, phi2) residual rms [rad] over the held-out multisine and
@@ -496,7 +496,7 @@ def judge(
     held_out: list[Recording],
 ) -> None:
     """The two checks of the fit against the reduction ``reference``, into ``trial``."""
-    std = result.diagnostics["channel_std"]
+    std = result.diagnostics.channel_std
     pairs = (result.parameters, reference)
     trial.cost = tuple(weighted_cost(free_run_residuals(p, training), std) for p in pairs)
     trial.criterion = tuple(training_criterion(p, training) for p in pairs)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hframe_id.errors import OptionError
-from hframe_id.fitting.problem import REST_SAMPLES
+from hframe_id.fitting.dataset import REST_SAMPLES
 
 #: 0 V recorded first [s]: the protocols' pre-roll (``hframe_id.rig.protocols``), longer
 #: than the fit's rest test (``REST_SAMPLES``, 10 ms at 1 kHz).

@@ -14,7 +14,29 @@ orbit determination; Tapley, Schutz & Born, Statistical Orbit Determination, sec
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
+
+
+@dataclass(frozen=True)
+class Consider:
+    """What a fit's intervals assume about the parameters it held
+    (``held_uncertainty.include_held_uncertainty``).
+
+    ``held_relative_std``: each held parameter with a prior, by name, its prior relative std
+    (dimensionless, 0.2: +/-20 %); ``method``: how the priors entered the intervals,
+    ``"linear"`` (the consider covariance at the optimum) or ``"refit"`` (whole refits);
+    ``relative_std_added``: per free parameter, the std the priors add, in its theta units
+    (relative for log-scale parameters; SI over the parameter's linear scale for signed
+    ones); ``failed_refits``: the refits that did not converge (``"name xfactor:
+    message"``).
+    """
+
+    held_relative_std: dict[str, float]
+    method: str = "linear"
+    relative_std_added: dict[str, float] = field(default_factory=dict)
+    failed_refits: tuple[str, ...] = ()
 
 
 def consider_covariance(

@@ -119,11 +119,6 @@ class Dataset:
         """Samples N in the record."""
         return int(self.inputs.shape[0])
 
-    @property
-    def outputs(self) -> np.ndarray:
-        """``measured``, under the name the transcriptions read (as ``Recording.outputs``)."""
-        return self.measured
-
     def shows_rest(self, noise_std: np.ndarray | None = None) -> bool:
         """Whether the channels show rest over the first ``REST_SAMPLES`` (``starts_at_rest``)
         with sensor noise ``noise_std`` [SI] (default: the dataset's own ``noise_std``)."""

@@ -20,7 +20,8 @@ import math
 import casadi as ca
 import numpy as np
 
-from hframe_id.fitting.problem import FitProblem, state_outputs
+from hframe_id.fitting.dataset import state_outputs
+from hframe_id.fitting.problem import FitProblem
 
 #: Savitzky-Golay window [samples] and polynomial order for velocities and accelerations.
 SG_WINDOW = 5

@@ -7,7 +7,7 @@ import time
 from dataclasses import replace
 
 from hframe_id.fitting.noise_rounds import channel_rms
-from hframe_id.fitting.result import FitResult, ParameterEstimate, spread
+from hframe_id.fitting.result import FitDiagnostics, FitResult, ParameterEstimate, spread
 from hframe_id.parameters import ParameterSet
 
 #: A free parameter closer to a bound than this many of its (relative) standard errors is
@@ -178,17 +178,10 @@ def fit_result(problem, ms, gn, state, stages, stats, held, start, regression=No
         evaluations=gn.evaluations,
         problem=problem,
         equation_error=None if regression is None else regression[0],
-        diagnostics={
-            "channel_std": dict(
-                zip(problem.output_names, problem.channel_std.tolist(), strict=True)
-            ),
-            "channel_rms": channel_rms(ms, state.evaluation),
-            "noise_scale": stats.noise_scale,
-            "hac_bandwidths": stats.bandwidths,
-            "collinearity_of_set": stats.collinearity_set,
-            "max_defect": final.max_defect,
-            "residual_rms_noise_std": misfit,
-            "substeps": list(final.substeps),
-            "at_default_box": tuple(at_box),
-        },
+        diagnostics=FitDiagnostics(
+            channel_std=dict(zip(problem.output_names, problem.channel_std.tolist(), strict=True)),
+            channel_rms=channel_rms(ms, state.evaluation),
+            residual_rms_noise_std=misfit,
+            at_default_box=tuple(at_box),
+        ),
     )

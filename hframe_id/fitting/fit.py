@@ -25,7 +25,13 @@ import numpy as np
 
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import at_bound_clause
-from hframe_id.fitting.known_points import Criterion, known_points, reference_sets
+from hframe_id.fitting.known_points import (
+    Criterion,
+    KnownPointsReport,
+    candidate_thetas,
+    judged_starts,
+    known_points,
+)
 from hframe_id.fitting.local_fit import fit_in_box
 from hframe_id.fitting.multistart import judged, seeded_starts
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
@@ -88,7 +94,7 @@ def fit_recordings(
 def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
     """The fit from ``initial`` and from ``options.starts - 1`` seeded draws around it
     (``multistart``), one after another; the best successful one by its file's criterion
-    (the first's if none succeeded), with every start's outcome in ``diagnostics["starts"]``."""
+    (the first's if none succeeded), with every start's outcome in ``diagnostics.starts``."""
     progress = progress_sink(options)
     first = _fit_widening(recordings, initial, options)
     problem = first.problem
@@ -107,9 +113,7 @@ def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitRes
         results.append((label, _started_from(_fit_widening(recordings, start, named), initial)))
     outcomes = judged(results, Criterion.of(first, recordings))
     k = min(range(len(outcomes)), key=lambda i: outcomes[i].criterion)
-    best = results[k][1]
-    best.diagnostics["starts"] = outcomes
-    return best
+    return results[k][1].with_diagnostics(starts=tuple(outcomes))
 
 
 def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
@@ -122,12 +126,12 @@ def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> Fit
     with F_c_bridge on the box, 1.53 x the reduction's training cost, in 77 s against 36 s.)"""
     for _ in range(BOX_WIDENINGS):
         result = fit_in_box(recordings, initial, options, may_widen=True)
-        boxed = result.diagnostics["at_default_box"]
+        boxed = result.diagnostics.at_default_box
         if not boxed:
             return result
         options = _widened(options, result, boxed)
     result = fit_in_box(recordings, initial, options)
-    boxed = result.diagnostics["at_default_box"]
+    boxed = result.diagnostics.at_default_box
     if not (boxed and result.success):
         return result
     ends = open_ends(result, recordings, boxed)
@@ -208,15 +212,7 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
         ms = MultipleShooting(problem)
         ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
         regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
-    thetas = [
-        ("the start", np.zeros(len(problem.free))),
-        ("the equation-error estimate", regressed),
-        *((label, problem.theta_of(p)) for label, p in reference_sets(initial.variant)),
-        *(
-            (f"known point {i + 1} ({p.title})", problem.theta_of(p))
-            for i, p in enumerate(options.known_points)
-        ),
-    ]
+    thetas = candidate_thetas(problem, regressed, options.known_points)
     # The user's bounds and physics (0 of a friction fitted linearly) hold for every point the
     # fit may continue from; the default box, drawn around the start, does not.
     lower = np.where(problem.box_lower, -np.inf, problem.theta_lower)
@@ -231,16 +227,15 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
 
 def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
-    written file (a free-run simulation of each record from the fit's initial state,
-    ``known_points.Criterion``): ended worse than one, it continues from the best of them;
-    worse still, it fails saying so. A fit that failed continues from the best point other
-    than its start (where it has already failed) if that point simulates the data better
-    than the failed fit's end."""
+    written file (a free-run simulation of each record, ``known_points.Criterion``): ended
+    worse than one, it continues from the best of them; worse still, it fails saying so. A
+    fit that failed continues from each point it knows other than its start (where it has
+    already failed), best first, until a continuation succeeds no worse than the failed
+    fit's end and than the point it started from."""
     criterion = Criterion.of(result, recordings)
-    # Every point starts where the fit's trajectory does: its estimated initial state (a
-    # record at rest: velocities zero, positions within a sensor's resolution of the
-    # replay's). That favours the fit, so a point that still beats it is better.
-    starts = list(result.initial_states)
+    # Every point, the fit too, from the better of the fit's initial states and the
+    # replay's rest state, which ``validate`` starts the written file from (``judged_starts``).
+    starts = judged_starts(result)
     # A failed fit's end point is a point it knows too: a continuation must beat it (dev
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended
     # 300 x the reduction's training criterion; the failed fit's point simulated better).
@@ -248,34 +243,38 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     candidates = _known_candidates(recordings, initial, options, result)
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
-    if not candidates:
-        return result
     points = known_points(candidates, criterion, starts)
-    best = points[0]
-    report = {"fit": own, **{p.label: p.criterion for p in points}}
-    result.diagnostics["known_points_criterion"] = criterion.name
+    report = KnownPointsReport(criterion.name, own, {p.label: p.criterion for p in points})
     # Differences under LIKELIHOOD_RATIO_95 are not significant at 95 %: such a point is not
     # better, and a continued fit that ends there has reached it.
-    if best.criterion >= own - LIKELIHOOD_RATIO_95:
-        result.diagnostics["known_points"] = report
-        return result
-    again = _started_from(_fit_widening(recordings, best.parameters, options), initial)
-    continued = (
-        criterion(again.parameters, list(again.initial_states)) if again.success else math.inf
+    tried = (
+        points
+        if not result.success
+        else [p for p in points[:1] if p.criterion < own - LIKELIHOOD_RATIO_95]
     )
-    report[f"fit continued from {best.label}"] = continued
-    if continued <= best.criterion + LIKELIHOOD_RATIO_95:
-        again.diagnostics["known_points"] = report
-        again.diagnostics["known_points_criterion"] = criterion.name
-        why = "failed" if not result.success else "ended worse"
-        return replace(
-            again,
-            message=f"{again.message}; continued from {best.label}, where the first fit {why}",
-        )
-    result.diagnostics["known_points"] = report
+    for point in tried:
+        again = _started_from(_fit_widening(recordings, point.parameters, options), initial)
+        continued = criterion(again.parameters, judged_starts(again)) if again.success else math.inf
+        report = replace(report, continued={**report.continued, point.label: continued})
+        if continued <= min(point.criterion, own) + LIKELIHOOD_RATIO_95:
+            why = "failed" if not result.success else "ended worse"
+            return replace(
+                again.with_diagnostics(known_points=report),
+                message=f"{again.message}; continued from {point.label}, where the first fit {why}",
+            )
+    result = result.with_diagnostics(known_points=report)
+    if not tried:
+        return result
     if not result.success:
-        ended = "failed too" if not again.success else f"ended worse than it ({continued:.6g})"
-        return replace(result, message=result.message + f"; a fit from {best.label} {ended}")
+        return replace(
+            result,
+            message=result.message
+            + "; fits continued from "
+            + ", ".join(p.label for p in tried)
+            + " failed or ended worse than it",
+        )
+    best = tried[0]
+    continued = report.continued[best.label]
     return replace(
         result,
         success=False,

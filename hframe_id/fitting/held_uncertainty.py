@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from hframe_id.fitting.consider import consider_covariance
+from hframe_id.fitting.consider import Consider, consider_covariance
 from hframe_id.fitting.estimates import ended_at_bound
 from hframe_id.fitting.options import (
     HELD_PRIOR_RELATIVE_STD,
@@ -28,12 +28,12 @@ def include_held_uncertainty(problem, recordings, state, result):
         prior.update({n: HELD_PRIOR_RELATIVE_STD for n in result.not_identified})
     p = problem.parameters(state.theta)
     held = [n for n in names if n in prior and n not in result.free_names and p[names.index(n)]]
-    result.diagnostics["consider"] = {"held_relative_std": {n: prior[n] for n in held}}
+    held_relative_std = {n: prior[n] for n in held}
     if not held or not result.free_names:
-        return result
+        return result.with_diagnostics(consider=Consider(held_relative_std))
+    failed: list[str] = []
     if options.consider_method == "refit":
         variances, failed = _refit_consider_variances(problem, recordings, state, held, prior)
-        result.diagnostics["consider"]["failed_refits"] = failed
         variances = {n: variances[problem.free_names.index(n)] for n in result.free_names}
     else:
         variances = _linear_consider_variances(problem, recordings, state, result, held, prior)
@@ -51,9 +51,8 @@ def include_held_uncertainty(problem, recordings, state, result):
             ci95 = ended_at_bound(problem, state, f, ci95)
         extra[name] = math.sqrt(variance)
         estimates[name] = replace(est, relative_std=rel, std_error=std, ci95=ci95)
-    result.diagnostics["consider"]["relative_std_added"] = extra
-    result.diagnostics["consider"]["method"] = options.consider_method
-    return replace(result, estimates=estimates)
+    consider = Consider(held_relative_std, options.consider_method, extra, tuple(failed))
+    return replace(result, estimates=estimates).with_diagnostics(consider=consider)
 
 
 def _linear_consider_variances(problem, recordings, state, result, held, prior) -> dict:

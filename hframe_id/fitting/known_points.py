@@ -11,19 +11,31 @@ the points it knows (issue 25, "never worse than a point it knows"):
 - the sets the user names (``FitOptions.known_points``).
 
 The criterion is what ``hframe-id validate`` reproduces: a free-run simulation of each
-training recording (``validation.replay.simulate_channels``) from the fit's initial state (a
-record at rest: velocities zero, positions within a sensor's resolution of the replay's
-rest state; this favours the fit: a point that still beats it is better), its residuals
-weighted by the sensors' noise std per channel,
+training recording (``validation.replay.simulate_channels``), from the better of two initial
+states (``judged_starts``): the fit's estimate (a record at rest: velocities zero, the
+positions' quantization phase estimated: fixed at the measured positions, it costs 1,100-2,100
+chi^2/2 units on the six shipped steps, more than the differences between good points), and
+the replay's rest state (what ``validate`` starts a record at rest from; a failed fit's
+estimated positions can be radians off, from where every other point looks worse); its
+residuals weighted by the sensors' noise std per channel,
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2,
 
 or, where the fit estimated its noise levels (model mismatch), concentrated over them: every
-point gets the levels that suit it best, C(p) = sum_j N_j / 2 ln(SSR_j(p) / N_j). Judged
-under the fit's own levels, which come from its own residuals, any other point would be
-judged on the fit's terms (a seeded start of the lubricated plant failed at 3.6 rad motor-angle
-rms with noise levels of 1.5-2 rad, under which Table 4.2 looked 300 x worse than it).
-Differences of either are likelihood-ratio statistics (``Criterion``).
+point gets the levels s_j >= sensor std_j that suit it best,
+
+    C(p) = sum_j N_j / 2 ln(s_j^2) + SSR_j(p) / (2 s_j^2) - N_j / 2,
+    s_j^2 = max(SSR_j(p) / N_j, std_j^2),
+
+which is sum_j N_j / 2 ln(SSR_j / N_j) while every channel is above its sensor's noise. The
+floor is the noise rounds' (``noise_rounds.noise_levels``): without it a point that fits one
+channel below its sensor's noise gains without bound (ln 0) whatever it does to the others.
+Judged under the fit's own levels, which come from its own residuals, any other point would
+be judged on the fit's terms (a seeded start of the lubricated plant failed at 3.6 rad
+motor-angle rms with noise levels of 1.5-2 rad, under which Table 4.2 looked 300 x worse than
+it). Judged from that failed fit's own initial states only, likewise: its estimated initial
+positions made every other point look worse than its 4.6 rad free run from rest. Differences
+of either are likelihood-ratio statistics (``Criterion``).
 
 Each known point enters with the fit's fixed parameters and its own values of the free ones,
 clipped into the user's bounds, not into the default box drawn around the start
@@ -36,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +67,34 @@ class KnownPoint:
     criterion: float  # C(p) (``Criterion``); inf where the simulation fails
 
 
+@dataclass(frozen=True)
+class KnownPointsReport:
+    """A fit judged against the points it knows, by the criterion ``criterion`` names
+    (``Criterion.name``); every number is that criterion, C(p) of the module docstring
+    (dimensionless: chi^2 / 2 units, or the concentrated criterion's), inf where the
+    simulation failed. ``fit``: the fit's own; ``points``: each known point's by its label,
+    best first; ``continued``: by the label of the point it started from, each fit continued
+    from a point (inf for one that failed), in the order they were tried."""
+
+    criterion: str
+    fit: float
+    points: dict[str, float]
+    continued: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def compared(self) -> dict[str, float]:
+        """What the fit was compared with, by label: the known points, then the fits continued
+        from them (``"fit continued from <label>"``)."""
+        continued = {f"fit continued from {k}": v for k, v in self.continued.items()}
+        return {**self.points, **continued}
+
+    @property
+    def criteria(self) -> dict[str, float]:
+        """Every number by label, the fit's as ``"fit"`` first, then ``compared`` (the
+        ``known_points`` of ``hframe-id fit --json``)."""
+        return {"fit": self.fit, **self.compared}
+
+
 def simulation_criterion(
     params: ParameterSet,
     recordings: Sequence[Recording],
@@ -66,11 +106,12 @@ def simulation_criterion(
     """C(p) of ``params`` on ``recordings`` (module docstring); ``channel_std`` [SI] per
     output; a channel lagging by ``latency_samples`` d is compared at sample k + d with the
     model at k; ``initial_states`` per recording (None: at rest). With ``concentrated`` the
-    noise levels are not given but estimated at ``params`` itself (``channel_std`` unused):
-    the concentrated criterion sum_j N_j / 2 ln(SSR_j / N_j) over channels j (N_j valid
-    samples, SSR_j their sum of squared residuals), which is what a fit that estimates its
-    noise levels minimises, and whose differences are likelihood-ratio statistics as
-    chi^2 / 2 differences are. inf if the simulation fails or leaves the finite numbers."""
+    noise levels are not given but estimated at ``params`` itself, floored at
+    ``channel_std`` (the sensors' std): the concentrated criterion, about sum_j N_j / 2
+    ln(SSR_j / N_j) over channels j (N_j valid samples, SSR_j their sum of squared
+    residuals), which is what a fit that estimates its noise levels minimises, and whose
+    differences are likelihood-ratio statistics as chi^2 / 2 differences are. inf if the
+    simulation fails or leaves the finite numbers."""
     from hframe_id.validation.replay import simulate_channels
 
     latency = latency_samples or {}
@@ -91,7 +132,7 @@ def simulation_criterion(
             counts[name] = counts.get(name, 0) + int(valid.sum())
     if concentrated:
         total = sum(
-            0.5 * counts[name] * math.log(max(squares[name], math.ulp(0.0)) / counts[name])
+            _concentrated_term(squares[name], counts[name], channel_std[name])
             for name in squares
             if counts[name]
         )
@@ -100,13 +141,36 @@ def simulation_criterion(
     return total if np.isfinite(total) else math.inf
 
 
+def _concentrated_term(squares: float, count: int, floor_std: float) -> float:
+    """One channel's term of the concentrated criterion: N / 2 ln(s^2) + SSR / (2 s^2) -
+    N / 2 with s^2 = max(SSR / N, ``floor_std``^2) (``squares`` SSR [SI^2], ``count`` N)."""
+    variance = squares / count
+    if variance >= floor_std**2:
+        return 0.5 * count * math.log(max(variance, math.ulp(0.0)))
+    floor = floor_std**2
+    return 0.5 * count * math.log(floor) + 0.5 * squares / floor - 0.5 * count
+
+
+def judged_starts(result) -> tuple[list[np.ndarray | None], ...]:
+    """The initial states the points are judged from by a ``FitResult``'s ``Criterion``, two
+    per-record lists: the fit's estimates, and the replay's rest state (None) for each record
+    at rest with the fit's estimate for one that starts in motion (module docstring)."""
+    own = list(result.initial_states)
+    replay = [
+        None if experiment.at_rest else x0
+        for experiment, x0 in zip(result.problem.experiments, own, strict=True)
+    ]
+    return own, replay
+
+
 @dataclass(frozen=True)
 class Criterion:
     """How a fit judges a parameter set: ``simulation_criterion`` on its training
     ``recordings``, under its noise levels ``channel_std`` [SI] and latencies, concentrated
     over the noise levels where the fit estimated them (``concentrated``: every point then
-    gets its own levels; judged under the fit's own, estimated from its residuals, any other
-    point would be judged on the fit's terms)."""
+    gets its own levels, floored at ``channel_std``, then the sensors' std; judged under the
+    fit's own, estimated from its residuals, any other point would be judged on the fit's
+    terms)."""
 
     recordings: tuple[Recording, ...]
     channel_std: dict[str, float]
@@ -116,23 +180,26 @@ class Criterion:
     @classmethod
     def of(cls, result, recordings: Sequence[Recording]) -> Criterion:
         """The criterion of a ``FitResult``'s written file."""
-        noise = result.diagnostics.get("noise") or {}
-        return cls(
-            tuple(recordings),
-            dict(result.diagnostics["channel_std"]),
-            dict(result.options.latency_samples),
-            noise.get("method") == "estimated",
-        )
+        noise = result.diagnostics.noise
+        concentrated = noise is not None and noise.method == "estimated"
+        std = dict(result.diagnostics.channel_std)
+        if concentrated:
+            std = {name: channel.sensor_std for name, channel in noise.channels.items()}
+        return cls(tuple(recordings), std, dict(result.options.latency_samples), concentrated)
 
-    def __call__(self, params: ParameterSet, initial_states=None) -> float:
-        """C(params) from ``initial_states`` per recording (None: at rest)."""
-        return simulation_criterion(
-            params,
-            self.recordings,
-            self.channel_std,
-            self.latency_samples,
-            initial_states,
-            self.concentrated,
+    def __call__(self, params: ParameterSet, starts=None) -> float:
+        """C(params): the lowest over ``starts``, alternative per-recording lists of initial
+        states (``judged_starts``; None: from rest only)."""
+        return min(
+            simulation_criterion(
+                params,
+                self.recordings,
+                self.channel_std,
+                self.latency_samples,
+                initial_states,
+                self.concentrated,
+            )
+            for initial_states in (starts or (None,))
         )
 
     @property
@@ -164,13 +231,29 @@ def reference_sets(variant: str) -> list[tuple[str, ParameterSet]]:
     return sets
 
 
+def candidate_thetas(
+    problem, regressed: np.ndarray | None, user_points: Sequence[ParameterSet] = ()
+) -> list[tuple[str, np.ndarray]]:
+    """(label, theta of ``problem``) of every point a fit knows: the start (theta 0), the
+    equation-error estimate ``regressed`` (if any), the model's reference files
+    (``reference_sets``) and ``user_points`` (``FitOptions.known_points``); not clipped."""
+    return [
+        ("the start", np.zeros(len(problem.free))),
+        *([] if regressed is None else [("the equation-error estimate", regressed)]),
+        *((label, problem.theta_of(p)) for label, p in reference_sets(problem.initial.variant)),
+        *(
+            (f"known point {i + 1} ({p.title})", problem.theta_of(p))
+            for i, p in enumerate(user_points)
+        ),
+    ]
+
+
 def known_points(
     candidates: Sequence[tuple[str, ParameterSet]],
     criterion: Criterion,
-    initial_states: Sequence[np.ndarray | None] | None = None,
+    starts=None,
 ) -> list[KnownPoint]:
-    """Each (label, parameter set) candidate with its ``criterion``, best first."""
-    points = [
-        KnownPoint(label, params, criterion(params, initial_states)) for label, params in candidates
-    ]
+    """Each (label, parameter set) candidate with its ``criterion`` from ``starts``
+    (``judged_starts``), best first."""
+    points = [KnownPoint(label, params, criterion(params, starts)) for label, params in candidates]
     return sorted(points, key=lambda p: p.criterion)

@@ -150,7 +150,7 @@ def fit_in_box(
         early = fit_result(
             problem, ms, best[1], best[0], stages, best[2], best[3], start, regression
         )
-        if early.diagnostics["at_default_box"]:
+        if early.diagnostics.at_default_box:
             return early
     sensor_std = problem.channel_std.copy()
     rounds = 0
@@ -165,8 +165,8 @@ def fit_in_box(
     state, gn, stats, held = best
     gn.evaluations = counter["evaluations"]
     result = fit_result(problem, ms, gn, state, stages, stats, held, start, regression)
-    result.diagnostics["noise"] = noise_report(
-        problem, sensor_std, result.diagnostics["channel_rms"], rounds, settling
+    result = result.with_diagnostics(
+        noise=noise_report(problem, sensor_std, result.diagnostics.channel_rms, rounds, settling)
     )
     result = _misfit_judged(result, ms, state, sensor_std, estimated=bool(rounds))
     result = include_held_uncertainty(problem, recordings, state, result)
@@ -177,7 +177,7 @@ def fit_in_box(
 def _misfit_judged(result: FitResult, ms, state, sensor_std: np.ndarray, estimated: bool):
     """``result`` with its residual rms in units of the sensors' noise (``sensor_std`` [SI]:
     the user's ``channel_std`` or the rig's specification, never a level estimated from the
-    residuals) in ``diagnostics["residual_rms_sensor_std"]``, failed as a poor fit if that
+    residuals) in ``diagnostics.residual_rms_sensor_std``, failed as a poor fit if that
     exceeds the misfit limit: ``FitOptions.max_misfit`` if given, else ``DEFAULT_MAX_MISFIT``
     for a fit weighted by the sensors' noise, and no limit for one that estimated its noise
     levels (model mismatch: stated with its evidence in the report, and judged against the
@@ -186,7 +186,7 @@ def _misfit_judged(result: FitResult, ms, state, sensor_std: np.ndarray, estimat
     scale = ms.problem.channel_std / sensor_std
     residual = state.evaluation.residual * scale
     misfit = float(np.sqrt(np.mean(residual[used] ** 2))) if used.any() else math.nan
-    result.diagnostics["residual_rms_sensor_std"] = misfit
+    result = result.with_diagnostics(residual_rms_sensor_std=misfit)
     options = result.options
     limit = options.max_misfit
     if limit is None and not estimated:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hframe_id.fitting.known_points import Criterion
+from hframe_id.fitting.known_points import Criterion, judged_starts
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.parameters import ParameterSet
 
@@ -73,14 +73,13 @@ def seeded_starts(
 
 def judged(results: Sequence[tuple[str, object]], criterion: Criterion) -> list[StartOutcome]:
     """Each (label, ``FitResult``) judged by ``criterion`` (the first fit's), from its own
-    initial states; a failed fit scores inf."""
+    initial states or the replay's rest state (``known_points.judged_starts``); a failed
+    fit scores inf."""
     return [
         StartOutcome(
             label,
             bool(result.success),
-            criterion(result.parameters, list(result.initial_states))
-            if result.success
-            else math.inf,
+            criterion(result.parameters, judged_starts(result)) if result.success else math.inf,
         )
         for label, result in results
     ]

@@ -25,7 +25,7 @@ does not. Measured 2026-11-26, docs/studies/.)
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -54,6 +54,46 @@ WARM_COST_RTOL = 1e-6
 REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
 
 
+@dataclass(frozen=True)
+class ChannelNoise:
+    """How a fit weighed one output channel, in the channel's SI unit (m or rad):
+    ``sensor_std`` the sensor's noise std (the user's ``channel_std`` or the rig's
+    specification), ``weight_std`` the std the fit weighed it with (the sensor's, or a level
+    estimated from the residuals), ``residual_rms`` the fit's residual rms over the valid
+    samples; ``residual_rms_sensor_std`` that rms in sensor std (dimensionless)."""
+
+    sensor_std: float
+    weight_std: float
+    residual_rms: float
+    residual_rms_sensor_std: float
+
+
+@dataclass(frozen=True)
+class NoiseSettling:
+    """How far estimated noise levels were from their fixed point when the rounds ended:
+    ``change`` the largest relative change (in log, dimensionless) of a level over the last
+    round; ``settled`` whether it was within ``NOISE_RTOL``."""
+
+    change: float
+    settled: bool
+
+
+@dataclass(frozen=True)
+class NoiseReport:
+    """How a fit weighed its channels: ``rounds`` of noise estimation (0: by the sensors'
+    noise), ``channels`` each output's ``ChannelNoise`` (in the model's output order) and,
+    for estimated levels, their ``settling`` (None for sensor weights)."""
+
+    rounds: int
+    channels: dict[str, ChannelNoise]
+    settling: NoiseSettling | None = None
+
+    @property
+    def method(self) -> str:
+        """``"estimated"`` (levels estimated from the residuals) or ``"sensor"``."""
+        return "estimated" if self.rounds else "sensor"
+
+
 def channel_rms(ms: MultipleShooting, ev: Evaluation) -> dict[str, float]:
     """Residual rms of each output channel over its valid samples [SI]."""
     problem = ms.problem
@@ -80,8 +120,8 @@ def estimate_noise(
     the last that stalls is re-weighted from where it stopped.
 
     Returns (problem, transcription, state, solver, rounds, settling), the problem weighted
-    by the levels of the last round; ``settling``: the largest relative change (in
-    log) of a level over the last round, and whether it met ``NOISE_RTOL``.
+    by the levels of the last round; ``settling`` (``NoiseSettling``): the largest relative
+    change (in log) of a level over the last round, and whether it met ``NOISE_RTOL``.
     """
     sensor_std = problem.channel_std
     state.active = np.ones(len(problem.free), dtype=bool)
@@ -105,8 +145,7 @@ def estimate_noise(
             problem, ms, state, gn, kept = accepted
             stages.append(_rejected_round_report(stages[-1], kept, ms, state))
         change = _change(noise_levels(ms, state, sensor_std), problem.channel_std)
-    settling = {"change": change, "settled": change <= NOISE_RTOL}
-    return problem, ms, state, gn, rounds, settling
+    return problem, ms, state, gn, rounds, NoiseSettling(change, change <= NOISE_RTOL)
 
 
 def _change(std: np.ndarray, weight_std: np.ndarray) -> float:
@@ -171,22 +210,26 @@ def warm_solve(ms, start: SolverState, stages, counter, progress, label):
 
 
 def noise_report(
-    problem: FitProblem, sensor_std: np.ndarray, rms: dict, rounds: int, settling: dict | None
-) -> dict:
-    """Per channel: the sensor's noise std, the std the fit weighed with, and the residual
-    rms ``rms`` [SI] also in sensor std (the mismatch statement of the report); for
-    estimated levels also how far they were from their fixed point (``settling``)."""
-    return {
-        "method": "estimated" if rounds else "sensor",
-        "rounds": rounds,
-        **({"settling": settling} if rounds and settling is not None else {}),
-        "channels": {
-            name: {
-                "sensor_std": float(sensor_std[j]),
-                "weight_std": float(problem.channel_std[j]),
-                "residual_rms": rms[name],
-                "residual_rms_sensor_std": rms[name] / float(sensor_std[j]),
-            }
+    problem: FitProblem,
+    sensor_std: np.ndarray,
+    rms: dict[str, float],
+    rounds: int,
+    settling: NoiseSettling | None,
+) -> NoiseReport:
+    """Per channel: the sensor's noise std ``sensor_std`` [SI], the std the fit weighed with,
+    and the residual rms ``rms`` [SI] also in sensor std (the mismatch statement of the
+    report); for estimated levels (``rounds`` > 0) also how far they were from their fixed
+    point (``settling``)."""
+    return NoiseReport(
+        rounds=rounds,
+        channels={
+            name: ChannelNoise(
+                sensor_std=float(sensor_std[j]),
+                weight_std=float(problem.channel_std[j]),
+                residual_rms=rms[name],
+                residual_rms_sensor_std=rms[name] / float(sensor_std[j]),
+            )
             for j, name in enumerate(problem.output_names)
         },
-    }
+        settling=settling if rounds else None,
+    )

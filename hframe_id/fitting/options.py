@@ -178,7 +178,7 @@ class FitOptions:
     initial_state : each recording's initial state. ``"auto"`` (default): at rest (every
         velocity zero, as ``hframe-id validate`` and ``simulate`` start; the positions
         estimated, within a sensor's resolution of the measured ones) where the record's
-        first samples show rest (``problem.starts_at_rest``), estimated where it starts in
+        first samples show rest (``dataset.starts_at_rest``), estimated where it starts in
         motion; ``"rest"``: every record at rest; ``"estimate"``: every initial state
         estimated. A free initial state can absorb model error that the written file,
         simulated from rest, then shows (issue 25).

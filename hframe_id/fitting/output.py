@@ -142,29 +142,29 @@ def provenance(
 def noise_levels(result: FitResult) -> dict[str, Any]:
     """How the fit weighed each channel (the sensor's std, or a level estimated from the
     residuals under model mismatch) and its residual rms, SI with the unit in every key."""
-    noise = result.diagnostics["noise"]
+    noise = result.diagnostics.noise
     units = output_units(result.variant)
     statement = mismatch_statement(result)
     channels = {}
-    for name, channel in noise["channels"].items():
+    for name, channel in noise.channels.items():
         unit = units[name]
         channels[name] = {
-            f"sensor_std [{unit}]": _number(channel["sensor_std"]),
-            f"weight_std [{unit}]": _number(channel["weight_std"]),
-            f"residual_rms [{unit}]": _number(channel["residual_rms"]),
-            "residual_rms [sensor std]": _number(channel["residual_rms_sensor_std"]),
+            f"sensor_std [{unit}]": _number(channel.sensor_std),
+            f"weight_std [{unit}]": _number(channel.weight_std),
+            f"residual_rms [{unit}]": _number(channel.residual_rms),
+            "residual_rms [sensor std]": _number(channel.residual_rms_sensor_std),
         }
     return {
         "weights": (
-            "estimated from the residuals" if noise["method"] == "estimated" else "sensor noise"
+            "estimated from the residuals" if noise.method == "estimated" else "sensor noise"
         ),
-        "rounds": int(noise["rounds"]),
+        "rounds": int(noise.rounds),
         **(
             {
-                "levels_settled": bool(noise["settling"]["settled"]),
-                "levels_last_change": _number(math.expm1(noise["settling"]["change"])),
+                "levels_settled": bool(noise.settling.settled),
+                "levels_last_change": _number(math.expm1(noise.settling.change)),
             }
-            if "settling" in noise
+            if noise.settling is not None
             else {}
         ),
         "model_mismatch": statement is not None,

@@ -6,10 +6,8 @@ A fit is a weighted output-error least-squares problem over one or more experime
 
 with w_j = 1 / std_j (encoder quantization step / sqrt(12), laser noise), invalid samples left
 out, free parameters in log scale, theta = ln(p / p_initial), within bounds. The recordings
-on the model's channels are prepared in :mod:`hframe_id.fitting.dataset` (its
-``state_outputs``, ``output_kinds`` and ``REST_SAMPLES`` are re-exported here, where the
-transcription and the design import them); the transcription (multiple shooting) and the
-solver (Gauss-Newton) live in their own modules.
+on the model's channels are prepared in :mod:`hframe_id.fitting.dataset`; the
+transcription (multiple shooting) and the solver (Gauss-Newton) live in their own modules.
 """
 
 from __future__ import annotations
@@ -24,10 +22,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.dataset import REST_SAMPLES as REST_SAMPLES
 from hframe_id.fitting.dataset import Dataset
-from hframe_id.fitting.dataset import output_kinds as output_kinds
-from hframe_id.fitting.dataset import state_outputs as state_outputs
 from hframe_id.fitting.experiment import check_rigs, encoder_step
 from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model

@@ -32,8 +32,9 @@ import numpy as np
 from hframe_id.atomic import replace_atomically, staged_directory
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.experiment import applied_inputs
-from hframe_id.fitting.multistart import reached_best
-from hframe_id.fitting.noise_rounds import MISMATCH_RMS
+from hframe_id.fitting.known_points import KnownPointsReport
+from hframe_id.fitting.multistart import StartOutcome, reached_best
+from hframe_id.fitting.noise_rounds import MISMATCH_RMS, NoiseSettling
 from hframe_id.fitting.report_figures import (
     ExperimentSignals,
     plot_correlation,
@@ -134,10 +135,10 @@ def mismatch_statement(result: FitResult) -> str | None:
     level, or None when the fit weighed its channels by the sensors' noise or, with noise
     levels estimated (a first solve that stalled above it), still ended within
     ``MISMATCH_RMS`` sensor std on every channel."""
-    noise = result.diagnostics.get("noise")
-    if noise is None or noise["method"] != "estimated":
+    noise = result.diagnostics.noise
+    if noise is None or noise.method != "estimated":
         return None
-    ratios = [c["residual_rms_sensor_std"] for c in noise["channels"].values()]
+    ratios = [c.residual_rms_sensor_std for c in noise.channels.values()]
     if max(ratios) <= MISMATCH_RMS:
         return None
     span = f"{ratios[0]:.3g}" if len(ratios) == 1 else f"{min(ratios):.3g} to {max(ratios):.3g}"
@@ -145,15 +146,15 @@ def mismatch_statement(result: FitResult) -> str | None:
         "The model does not follow the data at the sensors' noise level "
         f"(residual rms {span} x the sensor std, per channel below). The channels were "
         "weighted by noise levels estimated from the residuals "
-        f"({noise['rounds']} round(s)) instead of the sensor specifications; the residuals "
+        f"({noise.rounds} round(s)) instead of the sensor specifications; the residuals "
         "are model error more than noise."
-        + _settling_text(noise.get("settling"))
-        + _best_known_text(result.diagnostics.get("known_points"))
-        + _portfolio_text(result.diagnostics.get("starts"))
+        + _settling_text(noise.settling)
+        + _best_known_text(result.diagnostics.known_points)
+        + _portfolio_text(result.diagnostics.starts)
     )
 
 
-def _portfolio_text(outcomes) -> str:
+def _portfolio_text(outcomes: tuple[StartOutcome, ...]) -> str:
     """How many starts of a multistart portfolio reached this optimum (more evidence that it
     is the best the model can do); empty without a portfolio."""
     if not outcomes:
@@ -164,27 +165,27 @@ def _portfolio_text(outcomes) -> str:
     )
 
 
-def _best_known_text(points: dict | None) -> str:
+def _best_known_text(report: KnownPointsReport | None) -> str:
     """The evidence that the mismatch is the model's, not a poor optimum's: the written
     parameters simulate the training records better than every point the fit knows
     (``fitting.known_points``); empty where they were not compared."""
-    if not points:
+    if report is None:
         return ""
-    others = [label for label in points if label != "fit" and not label.startswith("fit ")]
+    others = list(report.points)
     return (
         f" Its parameters simulate the training records better than the {len(others)} other "
         f"point(s) it knows ({', '.join(others)})."
     )
 
 
-def _settling_text(settling: dict | None) -> str:
+def _settling_text(settling: NoiseSettling | None) -> str:
     """A sentence for noise levels that had not reached their fixed point (empty if they
-    had, or for reports written before this was recorded)."""
-    if settling is None or settling["settled"]:
+    had, or were not estimated)."""
+    if settling is None or settling.settled:
         return ""
     return (
         " The noise levels had not settled when the rounds ended: the residual rms differs "
-        f"from the weights by up to {100 * math.expm1(settling['change']):.0f} % on a "
+        f"from the weights by up to {100 * math.expm1(settling.change):.0f} % on a "
         "channel, so the weighting between channels is approximate."
     )
 
@@ -202,16 +203,14 @@ def mismatch_rows(result: FitResult) -> list[tuple[str, ...]]:
             "residual rms [sensor std]",
         )
     ]
-    for name, channel in result.diagnostics["noise"]["channels"].items():
+    for name, channel in result.diagnostics.noise.channels.items():
         scale, unit = shown_in(units[name])
+        levels = (channel.sensor_std, channel.weight_std, channel.residual_rms)
         rows.append(
             (
                 name,
-                *(
-                    f"{scale * channel[key]:.3g} {unit}"
-                    for key in ("sensor_std", "weight_std", "residual_rms")
-                ),
-                f"{channel['residual_rms_sensor_std']:.3g}",
+                *(f"{scale * level:.3g} {unit}" for level in levels),
+                f"{channel.residual_rms_sensor_std:.3g}",
             )
         )
     return rows

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from hframe_id.fitting.consider import Consider
+from hframe_id.fitting.known_points import KnownPointsReport
+from hframe_id.fitting.multistart import StartOutcome
 from hframe_id.fitting.multistart import statement as multistart_statement
+from hframe_id.fitting.noise_rounds import NoiseReport
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem
 from hframe_id.fitting.solver import StageReport
@@ -59,6 +62,32 @@ class ParameterEstimate:
 
 
 @dataclass(frozen=True)
+class FitDiagnostics:
+    """What a fit reports beside its estimates. Per output channel, by name, in the channel's
+    SI unit (m or rad): ``channel_std`` the noise std the final solve weighed it with,
+    ``channel_rms`` its residual rms over the valid samples. ``residual_rms_noise_std`` and
+    ``residual_rms_sensor_std``: the residual rms over all valid samples in units of those
+    weights' std and of the sensors' (dimensionless; nan where not computed).
+    ``at_default_box``: free parameters that ended on the default box (drawn around the
+    start, ``FitOptions.bound_factor``). ``noise``: how the channels were weighed
+    (``noise_rounds.NoiseReport``); ``known_points``: the fit against the points it knows
+    (``known_points.KnownPointsReport``); ``starts``: each start of a multistart portfolio
+    (``multistart.StartOutcome``; empty without one); ``consider``: what the intervals
+    assume about held parameters (``consider.Consider``). None where that step did not
+    run."""
+
+    channel_std: dict[str, float] = field(default_factory=dict)
+    channel_rms: dict[str, float] = field(default_factory=dict)
+    residual_rms_noise_std: float = math.nan
+    residual_rms_sensor_std: float = math.nan
+    at_default_box: tuple[str, ...] = ()
+    noise: NoiseReport | None = None
+    known_points: KnownPointsReport | None = None
+    starts: tuple[StartOutcome, ...] = ()
+    consider: Consider | None = None
+
+
+@dataclass(frozen=True)
 class FitResult:
     """What a fit produced. ``parameters`` holds every parameter (fitted and fixed).
     Frozen: what changes it (intervals widened, a continuation, the jackknife) makes a new
@@ -85,7 +114,11 @@ class FitResult:
     #: (n_f,) theta of the equation-error estimate relative to ``problem``'s start (None: the
     #: fit had no first stage); a point the fit knows (``fit._known_candidates``).
     equation_error: np.ndarray | None = field(default=None, repr=False)
-    diagnostics: dict[str, Any] = field(default_factory=dict)
+    diagnostics: FitDiagnostics = field(default_factory=FitDiagnostics)
+
+    def with_diagnostics(self, **changes) -> FitResult:
+        """This result with ``changes`` to its ``diagnostics`` (``FitDiagnostics`` fields)."""
+        return replace(self, diagnostics=replace(self.diagnostics, **changes))
 
     @property
     def variant(self) -> str:
@@ -107,21 +140,21 @@ class FitResult:
         """Residual rms over the valid samples in units of the noise std the channels were
         weighted by (about 1 for a correct model on sim-rig data; about 1 by construction
         once the noise levels were estimated from the residuals)."""
-        return float(self.diagnostics.get("residual_rms_noise_std", math.nan))
+        return float(self.diagnostics.residual_rms_noise_std)
 
     @property
     def residual_rms_sensor(self) -> float:
         """Residual rms over the valid samples in units of the sensors' noise std (the
         user's ``channel_std`` or the rig's specification): the misfit that a level estimated
         from the residuals cannot hide."""
-        return float(self.diagnostics.get("residual_rms_sensor_std", math.nan))
+        return float(self.diagnostics.residual_rms_sensor_std)
 
     def held_statement(self) -> str | None:
         """What the intervals assume about held parameters (None if nothing is held or
         estimated with a prior): which parameters, at which values, with which prior
         relative std, and how the prior entered."""
-        consider = self.diagnostics.get("consider", {})
-        prior = consider.get("held_relative_std", {})
+        consider = self.diagnostics.consider
+        prior = consider.held_relative_std if consider is not None else {}
         sentences = []
         if self.prior_names:
             weights = dict(zip(self.problem.free_names, self.problem.prior_weight, strict=True))
@@ -139,13 +172,12 @@ class FitResult:
                 f"{name} = {self.parameters.values[name]:.4g} (+/-{100 * std:.0f} %)"
                 for name, std in prior.items()
             )
-            method = consider.get("method", "linear")
             how = (
                 "the spread of whole refits with each held value at exp(+/-std) of itself"
-                if method == "refit"
+                if consider.method == "refit"
                 else "consider covariance, linearised at the optimum"
             )
-            failed = consider.get("failed_refits", [])
+            failed = consider.failed_refits
             caveat = (
                 f" {len(failed)} of the refits did not converge: {'; '.join(failed)}."
                 if failed
@@ -174,23 +206,21 @@ class FitResult:
     def known_points_statement(self) -> str | None:
         """The simulation criterion of the fit against the points it knows
         (``hframe_id.fitting.known_points``), or None if they were not compared."""
-        points = self.diagnostics.get("known_points")
-        if not points:
+        report = self.diagnostics.known_points
+        if report is None:
             return None
-        own = points["fit"]
-        others = {k: v for k, v in points.items() if k != "fit"}
+        others = report.compared
         label = min(others, key=others.get)
-        name = self.diagnostics.get("known_points_criterion", "simulation criterion")
         return (
-            f"{name} from the recordings' start: {own:.6g}; the best known point, {label}: "
-            f"{others[label]:.6g}"
+            f"{report.criterion} from the recordings' start: {report.fit:.6g}; the best known "
+            f"point, {label}: {others[label]:.6g}"
         )
 
     @property
     def multistart_statement(self) -> str | None:
         """How many starts of a multistart portfolio reached the best optimum
         (``hframe_id.fitting.multistart``), or None without one."""
-        starts = self.diagnostics.get("starts")
+        starts = self.diagnostics.starts
         return multistart_statement(starts) if starts else None
 
     @property

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from hframe_id.fitting.dataset import state_outputs
 from hframe_id.fitting.kernel import (
     compiled_state_substep,
     compiled_substep,
@@ -36,7 +37,7 @@ from hframe_id.fitting.kernel import (
     window_function,
 )
 from hframe_id.fitting.options import TranscriptionOptions
-from hframe_id.fitting.problem import FitProblem, output_matrix, state_outputs
+from hframe_id.fitting.problem import FitProblem, output_matrix
 from hframe_id.fitting.shooting_nodes import ShootingNodes
 from hframe_id.simulation.integrators import (
     MIN_SUBSTEPS,
@@ -127,7 +128,7 @@ class MultipleShooting(ShootingNodes):
             self.inputs[i, :n] = exp.inputs[k0 : k0 + n]
             self.inputs[i, n:] = exp.inputs[k0 + n - 1]
             valid = exp.valid[k0 : k0 + n]
-            self.measured[i, :n] = np.where(valid, exp.outputs[k0 : k0 + n], 0.0)
+            self.measured[i, :n] = np.where(valid, exp.measured[k0 : k0 + n], 0.0)
             self.weight[i, :n] = valid / problem.channel_std
         # Windows i and i + 1 of the same experiment are joined by continuity (unless the
         # options ask for independent horizons: ``FitOptions.continuity``).
@@ -136,7 +137,7 @@ class MultipleShooting(ShootingNodes):
         )
         self.window_index_in_experiment = self.window_start // m
         #: (W, n_x) True for the node entries that are known, not estimated: the velocities
-        #: of an experiment's first node where the record starts at rest (``Experiment.at_rest``)
+        #: of an experiment's first node where the record starts at rest (``Dataset.at_rest``)
         self.fixed_node = np.zeros((len(exp_of), self.nx), dtype=bool)
         self.fixed_node[:, self.nq :] = np.array(
             [

@@ -45,14 +45,14 @@ class ShootingNodes:
         for e, exp in enumerate(self.problem.experiments):
             n = exp.n_samples
             weights = exp.valid / self.problem.channel_std * position
-            y = np.where(exp.valid, exp.outputs, 0.0)
+            y = np.where(exp.valid, exp.measured, 0.0)
             rigid = self._rigid_fit(cq @ modes, modes, y, weights)
             positions = rigid.copy()
             for j in np.flatnonzero(position):
-                positions[exp.valid[:, j], index[j]] = exp.outputs[exp.valid[:, j], j]
+                positions[exp.valid[:, j], index[j]] = exp.measured[exp.valid[:, j], j]
             rates = np.gradient(rigid, self.dt, axis=0) if n > 1 else np.zeros_like(rigid)
             for j in np.flatnonzero(rate):
-                rates[exp.valid[:, j], index[j] - self.nq] = exp.outputs[exp.valid[:, j], j]
+                rates[exp.valid[:, j], index[j] - self.nq] = exp.measured[exp.valid[:, j], j]
             for i in np.flatnonzero(integrated):
                 steps = 0.5 * (rates[1:, i] + rates[:-1, i]) * self.dt
                 rigid[:, i] = positions[:, i] = np.concatenate([[0.0], np.cumsum(steps)])
@@ -107,7 +107,7 @@ class ShootingNodes:
                 continue
             if not known[idx[0]]:
                 # The first node as given: measured positions, and no speed for a record at
-                # rest (``Experiment.at_rest``), the measured rates for one in motion.
+                # rest (``Dataset.at_rest``), the measured rates for one in motion.
                 if exp.at_rest:
                     nodes[idx[0], self.nq :] = 0.0
                 known[idx[0]] = True

@@ -35,7 +35,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from hframe_id.fitting.multistart import reached_best
+from hframe_id.fitting.known_points import KnownPointsReport
+from hframe_id.fitting.multistart import StartOutcome, reached_best
 from hframe_id.fitting.result import FitResult
 
 
@@ -69,8 +70,8 @@ def fit_summary(
                 recording: _number(share) for recording, share in shares[name].items()
             }
     units = {s.name: s.unit for s in result.problem.model.outputs} if result.problem else {}
-    rms = result.diagnostics.get("channel_rms", {})
-    std = result.diagnostics.get("channel_std", {})
+    rms = result.diagnostics.channel_rms
+    std = result.diagnostics.channel_std
     channels = {
         name: {
             "unit": units.get(name, ""),
@@ -94,15 +95,20 @@ def fit_summary(
         }
         if result.problem
         else {},
-        "known_points": {
-            label: _number(value)
-            for label, value in result.diagnostics.get("known_points", {}).items()
-        },
-        "starts": _starts(result.diagnostics.get("starts")),
+        "known_points": _known_points(result.diagnostics.known_points),
+        "starts": _starts(result.diagnostics.starts),
     }
 
 
-def _starts(outcomes) -> dict[str, Any] | None:
+def _known_points(report: KnownPointsReport | None) -> dict[str, float | None]:
+    """The fit's criterion and what it was compared with, by label (the fit's: ``"fit"``;
+    ``{}`` if not compared)."""
+    if report is None:
+        return {}
+    return {label: _number(value) for label, value in report.criteria.items()}
+
+
+def _starts(outcomes: tuple[StartOutcome, ...]) -> dict[str, Any] | None:
     """The portfolio's outcomes (``multistart.StartOutcome``) as plain data, or None."""
     if not outcomes:
         return None

@@ -116,6 +116,6 @@ def result_columns(result: FitResult) -> dict[str, Any]:
         columns[f"{name} ci95 high {unit}"] = float(est.ci95[1])
         columns[f"{name} identified"] = bool(est.identified)
     units = {s.name: s.unit for s in build_model(result.variant).outputs}
-    for channel, rms in result.diagnostics.get("channel_rms", {}).items():
+    for channel, rms in result.diagnostics.channel_rms.items():
         columns[f"rms {channel} [{units.get(channel, 'SI')}]"] = float(rms)
     return columns

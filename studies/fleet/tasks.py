@@ -69,14 +69,14 @@ def _fit(index, data, params, options, **extra) -> FitOutcome:
             index, "error", f"{type(err).__name__}: {err}", wall_time_s=time.perf_counter() - t0
         )
     free = {n: e for n, e in result.estimates.items() if e.free}
-    noise = result.diagnostics.get("noise", {})
+    noise = result.diagnostics.noise
     return FitOutcome(
         index,
         "ok" if result.success else "failed",
         result.message,
         float(result.cost),
-        noise.get("method", ""),
-        _concentrated_objective(data, noise.get("channels", {})),
+        noise.method,
+        _concentrated_objective(data, noise.channels),
         {n: float(e.estimate) for n, e in free.items()},
         {n: float(e.std_error) for n, e in free.items()},
         {n: (float(e.ci95[0]), float(e.ci95[1])) for n, e in free.items()},
@@ -89,9 +89,10 @@ def _fit(index, data, params, options, **extra) -> FitOutcome:
 
 def _concentrated_objective(recordings, channels: dict) -> float:
     """-log likelihood with each channel's noise std at its maximum-likelihood value (the
-    residual rms), in the cost's units (chi^2 / 2): sum_j N_j ln(rms_j / sensor std_j) + N / 2.
-    Fits whose noise levels were estimated (model mismatch) weigh their residuals each with
-    their own levels, so their costs are not comparable; this is."""
+    residual rms), in the cost's units (chi^2 / 2): sum_j N_j ln(rms_j / sensor std_j) + N / 2;
+    ``channels``: each channel's ``noise_rounds.ChannelNoise`` by name. Fits whose noise
+    levels were estimated (model mismatch) weigh their residuals each with their own levels,
+    so their costs are not comparable; this is."""
     total = 0.0
     for name, c in channels.items():
         n = sum(
@@ -99,7 +100,7 @@ def _concentrated_objective(recordings, channels: dict) -> float:
             for rec in recordings
             if name in rec.output_names
         )
-        total += n * (math.log(c["residual_rms"] / c["sensor_std"]) + 0.5)
+        total += n * (math.log(c.residual_rms / c.sensor_std) + 0.5)
     return total if channels else math.nan
 
 

@@ -1,5 +1,6 @@
 """Shared fixtures of the fitting tests."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -41,3 +42,20 @@ def truth(table):
 def steps(truth, x_step):
     """Two 0.4 s x-motion steps (+4 V and -4 V) of ``truth`` from rest."""
     return [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]
+
+
+@pytest.fixture(scope="session")
+def in_motion():
+    """``in_motion(recording, first)``: the recording from sample ``first`` on, a record that
+    starts in motion (its time from 0)."""
+
+    def cut(recording, first: int = 150):
+        return dataclasses.replace(
+            recording,
+            time_s=recording.time_s[first:] - recording.time_s[first],
+            inputs=recording.inputs[first:],
+            outputs=recording.outputs[first:],
+            valid=recording.valid[first:],
+        )
+
+    return cut

@@ -15,6 +15,7 @@ import pytest
 from hframe_id.figure_drawers import InlineDrawer
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting import report as report_module
+from hframe_id.fitting.noise_rounds import NoiseSettling
 from hframe_id.fitting.output import noise_levels
 from hframe_id.fitting.report import comparable_truth, mismatch_statement, write_report
 from hframe_id.parameters import load_parameter_file
@@ -99,8 +100,8 @@ def test_unsettled_noise_levels_are_stated(mismatched, settled):
     """Noise levels still moving when the rounds ended (by 16 %: realistic plant 1 of the
     mismatch study) are said to be approximate, in the report and in the parameter file."""
     result, _ = mismatched
-    noise = {**result.diagnostics["noise"], "settling": {"change": 0.145, "settled": settled}}
-    unsettled = dataclasses.replace(result, diagnostics={**result.diagnostics, "noise": noise})
+    noise = dataclasses.replace(result.diagnostics.noise, settling=NoiseSettling(0.145, settled))
+    unsettled = result.with_diagnostics(noise=noise)
     statement = mismatch_statement(unsettled)
     assert ("had not settled" in statement) is not settled
     assert settled or "up to 16 %" in statement
@@ -111,11 +112,9 @@ def test_unsettled_noise_levels_are_stated(mismatched, settled):
 
 def test_sensor_weighted_fit_has_no_mismatch_statement(mismatched):
     result, _ = mismatched
-    sensor = dataclasses.replace(
-        result,
-        diagnostics={**result.diagnostics, "noise": {**result.diagnostics["noise"], "rounds": 0,
-                                                       "method": "sensor"}},
-    )  # fmt: skip
+    sensor = result.with_diagnostics(
+        noise=dataclasses.replace(result.diagnostics.noise, rounds=0, settling=None)
+    )
     assert mismatch_statement(sensor) is None
     assert noise_levels(sensor)["model_mismatch"] is False
 
@@ -172,20 +171,18 @@ def test_estimated_noise_that_ends_at_the_sensor_level_states_no_mismatch(mismat
     # if they end within MISMATCH_RMS (3) sensor std on every channel (the shipped one-axis
     # pulses with the idler under a prior: 0.76 and 1.03), there is no mismatch to state.
     result, _ = mismatched
-    noise = result.diagnostics["noise"]
+    noise = result.diagnostics.noise
     channels = {
-        name: {**channel, "residual_rms_sensor_std": ratio}
+        name: dataclasses.replace(channel, residual_rms_sensor_std=ratio)
         for (name, channel), ratio in zip(
-            noise["channels"].items(), (0.76, 1.03, 2.9, 1.0), strict=True
+            noise.channels.items(), (0.76, 1.03, 2.9, 1.0), strict=True
         )
     }
-    at_sensor_level = dataclasses.replace(
-        result, diagnostics={**result.diagnostics, "noise": {**noise, "channels": channels}}
-    )
+    at_sensor_level = result.with_diagnostics(noise=dataclasses.replace(noise, channels=channels))
     assert mismatch_statement(at_sensor_level) is None
     levels = noise_levels(at_sensor_level)
     assert levels["model_mismatch"] is False and levels["weights"] == "estimated from the residuals"
-    channels["y"] = {**channels["y"], "residual_rms_sensor_std": 3.1}
+    channels["y"] = dataclasses.replace(channels["y"], residual_rms_sensor_std=3.1)
     assert "does not follow the data" in mismatch_statement(at_sensor_level)
 
 
@@ -209,7 +206,7 @@ def test_mismatch_is_stated_with_the_points_the_fit_beat(mismatched):
     result, _ = mismatched
     statement = mismatch_statement(result)
     assert statement is not None
-    others = [k for k in result.diagnostics["known_points"] if k != "fit"]
+    others = list(result.diagnostics.known_points.points)
     assert f"better than the {len(others)} other point(s) it knows" in statement
     assert all(label in statement for label in others)
 
@@ -220,9 +217,7 @@ def test_mismatch_is_stated_with_the_portfolio_that_reached_it(mismatched):
 
     result, _ = mismatched
     outcomes = [StartOutcome("the start", True, 10.0), StartOutcome("seeded", True, 30.0)]
-    with_starts = dataclasses.replace(
-        result, diagnostics={**result.diagnostics, "starts": outcomes}
-    )
+    with_starts = result.with_diagnostics(starts=tuple(outcomes))
     assert "1 of 2 starts of a multistart portfolio" in mismatch_statement(with_starts)
     assert "multistart: 1 of 2 starts reached" in with_starts.summary()
 
@@ -232,7 +227,7 @@ def test_the_misfit_is_measured_against_the_sensors_not_the_estimated_levels(mis
     whatever the fit (issue 25, item 1); the sensor-level misfit shows the mismatch, and a
     limit the user gives is judged by it."""
     result, recordings = mismatched
-    assert result.diagnostics["noise"]["method"] == "estimated"
+    assert result.diagnostics.noise.method == "estimated"
     assert result.residual_rms == pytest.approx(1.0, abs=0.2)
     assert result.residual_rms_sensor > 3 * result.residual_rms
     assert f"{result.residual_rms_sensor:.3g} x the sensors'" in result.summary()

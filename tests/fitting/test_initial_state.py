@@ -4,8 +4,6 @@ What the fit reports must be what ``hframe-id validate`` reproduces from the wri
 and validate simulates from rest at the first measured positions (issue 25, item 1).
 """
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -27,28 +25,17 @@ def step(table, x_step):
     return x_step(table, seed=7)
 
 
-def _cut(recording, first: int):
-    """The recording from sample ``first`` on: a record that starts in motion."""
-    return dataclasses.replace(
-        recording,
-        time_s=recording.time_s[first:] - recording.time_s[first],
-        inputs=recording.inputs[first:],
-        outputs=recording.outputs[first:],
-        valid=recording.valid[first:],
-    )
-
-
 def _sensor_std(recording, model):
     return np.array([default_channel_std(recording, s.name) for s in model.outputs])
 
 
-def test_rest_is_told_from_motion_by_the_first_window(table, step):
-    problem = build_problem([step, _cut(step, 150)], table, FitOptions(free=FREE))
+def test_rest_is_told_from_motion_by_the_first_window(table, step, in_motion):
+    problem = build_problem([step, in_motion(step, 150)], table, FitOptions(free=FREE))
     model = problem.model
     std = _sensor_std(step, model)
     at_rest, moving = problem.experiments
-    assert starts_at_rest(at_rest.outputs, at_rest.valid, std, 10, 1e-3)
-    assert not starts_at_rest(moving.outputs, moving.valid, std, 10, 1e-3)
+    assert starts_at_rest(at_rest.measured, at_rest.valid, std, 10, 1e-3)
+    assert not starts_at_rest(moving.measured, moving.valid, std, 10, 1e-3)
     assert at_rest.at_rest and not moving.at_rest
 
 
@@ -64,15 +51,15 @@ def test_a_record_at_rest_starts_at_rest(table, step):
     assert np.all(result.initial_states[0][4:] == 0.0)
     resolution = np.array([1.96e-5, 1.96e-5, 5e-6, 5e-6])  # encoder step, laser std
     assert np.all(np.abs(result.initial_states[0][:4] - rest[:4]) < resolution)
-    std = dict(result.diagnostics["channel_std"])
+    std = dict(result.diagnostics.channel_std)
     replayed = simulation_criterion(result.parameters, [step], std, None, result.initial_states)
     # The same RK4 (substeps from the same parameters): equal to the defects left (1e-2 std).
     assert replayed == pytest.approx(result.cost, rel=1e-4)
     assert "initial states at rest: " in result.summary()
 
 
-def test_estimated_on_request_and_for_records_in_motion(table, step):
-    moving = _cut(step, 150)
+def test_estimated_on_request_and_for_records_in_motion(table, step, in_motion):
+    moving = in_motion(step, 150)
     result = fit_recordings([moving], table, FitOptions(free=FREE))
     assert result.success, result.message
     assert result.initial_states[0][4:].any()  # a velocity was estimated

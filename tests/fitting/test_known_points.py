@@ -20,13 +20,12 @@ def test_the_models_reference_files_are_known_points():
 def test_the_fit_is_compared_with_what_it_knows(table, truth, steps):
     result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
     assert result.success, result.message
-    points = result.diagnostics["known_points"]
-    assert {"fit", "the start", "the equation-error estimate", "hframe-8-table4.1.yaml"} <= set(
-        points
-    )
+    report = result.diagnostics.known_points
+    points = report.points
+    assert {"the start", "the equation-error estimate", "hframe-8-table4.1.yaml"} <= set(points)
     assert any(label.startswith("known point 1") for label in points)
     # Matched data: the fit is the best of them, its truth included.
-    assert points["fit"] == min(points.values())
+    assert report.fit <= min(report.compared.values())
     assert "the best known point" in result.summary()
 
 
@@ -57,9 +56,9 @@ def test_a_fit_worse_than_a_known_point_continues_from_it(monkeypatch, table, tr
     assert len(calls) == 2
     assert result.success, result.message
     assert "continued from" in result.message
-    points = result.diagnostics["known_points"]
-    continued = next(v for k, v in points.items() if k.startswith("fit continued"))
-    assert continued <= min(v for k, v in points.items() if k not in ("fit",))
+    report = result.diagnostics.known_points
+    continued = next(iter(report.continued.values()))
+    assert continued <= min(report.compared.values())
 
 
 def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps):
@@ -70,7 +69,7 @@ def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps
     result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
     assert not result.success
     assert "the fit ends worse than" in result.message
-    std = dict(result.diagnostics["channel_std"])
+    std = dict(result.diagnostics.channel_std)
     assert simulation_criterion(table, steps, std) > simulation_criterion(truth, steps, std)
 
 
@@ -96,7 +95,7 @@ def test_a_given_bound_is_the_users_decision(table, steps):
     result = fit_recordings(steps, table.replace_values(M_cart=1.15, F_c_cart=0.3), options)
     assert result.success, result.message
     assert result.estimates["k_l"].at_bound
-    assert result.diagnostics["at_default_box"] == ()
+    assert result.diagnostics.at_default_box == ()
 
 
 def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, steps, truth):
@@ -111,28 +110,71 @@ def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, ste
     assert "where the first fit failed" in result.message
     assert result.parameters.values["k_l"] == pytest.approx(truth.values["k_l"], rel=1e-3)
     assert result.initial is start
-    points = result.diagnostics["known_points"]
-    assert points["fit"] > points["known point 1 (H-frame 8th-order model, nonlinear friction)"]
+    report = result.diagnostics.known_points
+    assert report.fit > report.points["known point 1 (H-frame 8th-order model, nonlinear friction)"]
 
 
-def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
-    """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
-    each point's own maximum-likelihood ones, less a constant, whatever levels are given."""
-    import numpy as np
-
+def _squares_and_counts(params, recordings):
+    """Per channel: the free run's sum of squared residuals [SI^2] and valid samples."""
     from hframe_id.validation.replay import simulate_channels
 
-    concentrated = simulation_criterion(table, steps, {}, concentrated=True)
     squares, counts = {}, {}
-    for rec in steps:
-        data, simulated = simulate_channels(table, rec)
+    for rec in recordings:
+        data, simulated = simulate_channels(params, rec)
         for j, name in enumerate(data.names):
             r = (data.measured[:, j] - simulated[:, j])[data.valid[:, j]]
             squares[name] = squares.get(name, 0.0) + float(r @ r)
             counts[name] = counts.get(name, 0) + r.size
+    return squares, counts
+
+
+def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
+    """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
+    each point's own maximum-likelihood ones, less a constant (floors far below them)."""
+    import numpy as np
+
+    squares, counts = _squares_and_counts(table, steps)
+    floors = dict.fromkeys(squares, 1e-12)
+    concentrated = simulation_criterion(table, steps, floors, concentrated=True)
     own_levels = {n: np.sqrt(squares[n] / counts[n]) for n in squares}
     at_own_levels = simulation_criterion(table, steps, own_levels)
     constant = sum(0.5 * counts[n] * (np.log(own_levels[n] ** 2) - 1.0) for n in squares)
     assert concentrated == pytest.approx(at_own_levels + constant, rel=1e-12)
     # The truth simulates these records better on every channel: lower either way.
-    assert simulation_criterion(truth, steps, {}, concentrated=True) < concentrated
+    assert simulation_criterion(truth, steps, floors, concentrated=True) < concentrated
+
+
+def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, steps):
+    """A channel fitted below its sensor's noise is judged at the sensor's level: N / 2
+    ln(std^2) + SSR / (2 std^2) - N / 2, not N / 2 ln(SSR / N), which goes to minus
+    infinity as SSR does whatever the other channels do."""
+    import math
+
+    squares, counts = _squares_and_counts(truth, steps)
+    floors = {n: 10 * math.sqrt(squares[n] / counts[n]) for n in squares}  # all floored
+    expected = sum(
+        0.5 * counts[n] * math.log(floors[n] ** 2)
+        + 0.5 * squares[n] / floors[n] ** 2
+        - 0.5 * counts[n]
+        for n in squares
+    )
+    floored = simulation_criterion(truth, steps, floors, concentrated=True)
+    assert floored == pytest.approx(expected, rel=1e-12)
+    unfloored = simulation_criterion(truth, steps, dict.fromkeys(floors, 1e-12), concentrated=True)
+    assert floored > unfloored
+
+
+def test_records_at_rest_are_also_judged_from_the_replays_rest_state(table, steps):
+    """Two alternatives: the fit's estimated initial states, and what ``validate`` replays,
+    None (the replay's rest state) for the steps, which start at rest; a point's criterion
+    is the lower."""
+    from hframe_id.fitting.known_points import Criterion, judged_starts
+
+    result = fit_recordings(steps[:1], table, FitOptions(free=("k_l",)))
+    assert all(e.at_rest for e in result.problem.experiments)
+    own, replay = judged_starts(result)
+    assert replay == [None]
+    assert own[0] is result.initial_states[0] or (own[0] == result.initial_states[0]).all()
+    criterion = Criterion.of(result, steps[:1])
+    both = criterion(result.parameters, (own, replay))
+    assert both == min(criterion(result.parameters, (own,)), criterion(result.parameters))

@@ -67,7 +67,7 @@ def test_a_portfolio_keeps_the_best_and_reports_every_start(table, x_step):
     steps = [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]
     result = fit_recordings(steps, table, FitOptions(free=FREE, starts=3, start_seed=1))
     assert result.success, result.message
-    outcomes = result.diagnostics["starts"]
+    outcomes = result.diagnostics.starts
     assert [o.label for o in outcomes][0] == "the start" and len(outcomes) == 3
     # Matched data from a start within x/÷2: every start finds the truth's optimum.
     assert reached_best(outcomes) == 3

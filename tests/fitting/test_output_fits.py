@@ -123,10 +123,10 @@ def test_the_residuals_estimate_each_channels_noise(servo):
         FitOptions(verbose=0, fix=("g",), noise="estimate"),
     )
     assert result.success, result.message
-    channels = result.diagnostics["noise"]["channels"]
+    channels = result.diagnostics.noise.channels
     # The rms of 2000 residuals estimates each noise std within 2 sqrt(1 / (2 N)) = 3 %.
     for output in ("theta", "omega"):
-        assert channels[output]["residual_rms"] == pytest.approx(NOISE[output], rel=0.03)
+        assert channels[output].residual_rms == pytest.approx(NOISE[output], rel=0.03)
 
 
 def test_a_speed_shows_rest_by_its_value(servo):

@@ -13,7 +13,7 @@ import pytest
 
 from hframe_id.analysis.linear import linearize
 from hframe_id.cli import main
-from hframe_id.fitting.problem import output_kinds, state_outputs
+from hframe_id.fitting.dataset import output_kinds, state_outputs
 from hframe_id.models import VARIANTS, build_model, load_model_file
 from hframe_id.parameters import ParameterSet, save_parameter_file
 from tests.models.refusals import refused_model_file
