@@ -155,7 +155,7 @@ def test_invalid_samples_are_left_out(hframe, recording):
     flagged = dataclasses.replace(recording, outputs=outputs, valid=valid)
     problem = build_problem([flagged], hframe, FitOptions())
     exp = problem.experiments[0]
-    assert not exp.valid[100:120, 2].any() and np.isnan(exp.outputs[100:120, 2]).all()
+    assert not exp.valid[100:120, 2].any() and np.isnan(exp.measured[100:120, 2]).all()
 
 
 def test_weights_default_to_the_sensor_noise(hframe, recording):
