@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from hframe_id.cli.numbers import MAX_SUBSTEPS, add_number
+from hframe_id.cli.numbers import add_number, add_substeps
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
@@ -117,14 +117,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="reachable rectangle [m] (default +/-0.1 m)",
     )
     parser.add_argument("--friction", metavar="{smooth,stick-slip,sign}", default="smooth")
-    add_number(
-        parser,
-        "--substeps",
-        int,
-        at_least=1,
-        at_most=MAX_SUBSTEPS,
-        help="RK4 substeps per sample (default: auto)",
-    )
+    add_substeps(parser)
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")
     out.add_argument("--plot", type=Path, metavar="DIR", help="write the four figures here")

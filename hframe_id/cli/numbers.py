@@ -68,3 +68,15 @@ def add_number(
     in one declaration."""
     kind_check = checked(option, kind, above=above, at_least=at_least, at_most=at_most, below=below)
     return parser.add_argument(option, type=kind_check, **kwargs)
+
+
+def add_substeps(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> argparse.Action:
+    """``--substeps``: RK4 substeps per sample, 1 to ``MAX_SUBSTEPS`` (default: automatic)."""
+    return add_number(
+        parser,
+        "--substeps",
+        int,
+        at_least=1,
+        at_most=MAX_SUBSTEPS,
+        help="RK4 substeps per sample (default: auto)",
+    )

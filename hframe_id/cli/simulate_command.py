@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.numbers import MAX_SUBSTEPS, add_number
+from hframe_id.cli.numbers import add_number, add_substeps
 from hframe_id.cli.outputs import (
     add_force_option,
     check_dir,
@@ -88,14 +88,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(Table 2.2) or sign (discontinuous, as the EMPS benchmark simulates); a plant file has "
         "its own",
     )
-    add_number(
-        parser,
-        "--substeps",
-        int,
-        at_least=1,
-        at_most=MAX_SUBSTEPS,
-        help="RK4 substeps per sample (default: auto)",
-    )
+    add_substeps(parser)
     parser.add_argument("--out", type=output_file("--out"), required=True, help="CSV file to write")
     parser.add_argument(
         "--mcap",
