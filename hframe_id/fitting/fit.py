@@ -233,8 +233,9 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     already failed), best first, until a continuation succeeds no worse than the failed
     fit's end and than the point it started from."""
     criterion = Criterion.of(result, recordings)
-    # Every point, the fit too, from the better of the fit's initial states and the
-    # replay's rest state, which ``validate`` starts the written file from (``judged_starts``).
+    # Every point, the fit too, from the fit's initial states, and for a failed fit also from
+    # the replay's rest state, which ``validate`` starts the written file from
+    # (``judged_starts``).
     starts = judged_starts(result)
     # A failed fit's end point is a point it knows too: a continuation must beat it (dev
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended

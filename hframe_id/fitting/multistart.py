@@ -73,7 +73,7 @@ def seeded_starts(
 
 def judged(results: Sequence[tuple[str, object]], criterion: Criterion) -> list[StartOutcome]:
     """Each (label, ``FitResult``) judged by ``criterion`` (the first fit's), from its own
-    initial states or the replay's rest state (``known_points.judged_starts``); a failed
+    initial states (``known_points.judged_starts``); a failed
     fit scores inf."""
     return [
         StartOutcome(

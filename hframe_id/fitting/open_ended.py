@@ -89,8 +89,7 @@ def open_ends(
 ) -> list[OpenEnd]:
     """The ``OpenEnd`` test of each of ``names`` (free parameters of ``result``, a
     ``FitResult``, on its default box), by the criterion of its written file
-    (``known_points.Criterion``) from the fit's initial states or the replay's rest state
-    (``known_points.judged_starts``)."""
+    (``known_points.Criterion``) from the fit's initial states (``known_points.judged_starts``)."""
     criterion = Criterion.of(result, recordings)
     starts = judged_starts(result)
     own = criterion(result.parameters, starts)

@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
@@ -131,8 +132,6 @@ def _squares_and_counts(params, recordings):
 def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
     """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
     each point's own maximum-likelihood ones, less a constant (floors far below them)."""
-    import numpy as np
-
     squares, counts = _squares_and_counts(table, steps)
     floors = dict.fromkeys(squares, 1e-12)
     concentrated = simulation_criterion(table, steps, floors, concentrated=True)
@@ -164,17 +163,19 @@ def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, step
     assert floored > unfloored
 
 
-def test_records_at_rest_are_also_judged_from_the_replays_rest_state(table, steps):
-    """Two alternatives: the fit's estimated initial states, and what ``validate`` replays,
-    None (the replay's rest state) for the steps, which start at rest; a point's criterion
-    is the lower."""
+def test_a_failed_fit_is_also_judged_from_the_replays_rest_state(table, steps):
+    """A converged fit's points are judged from its estimated initial states; a failed fit's
+    also from what ``validate`` replays, None (the replay's rest state) for the steps, which
+    start at rest; a point's criterion is then the lower."""
     from hframe_id.fitting.known_points import Criterion, judged_starts
 
     result = fit_recordings(steps[:1], table, FitOptions(free=("k_l",)))
-    assert all(e.at_rest for e in result.problem.experiments)
-    own, replay = judged_starts(result)
+    assert result.success and all(e.at_rest for e in result.problem.experiments)
+    (own,) = judged_starts(result)
+    assert np.array_equal(own[0], result.initial_states[0])
+    failed = replace(result, success=False)
+    own, replay = judged_starts(failed)
     assert replay == [None]
-    assert own[0] is result.initial_states[0] or (own[0] == result.initial_states[0]).all()
     criterion = Criterion.of(result, steps[:1])
     both = criterion(result.parameters, (own, replay))
     assert both == min(criterion(result.parameters, (own,)), criterion(result.parameters))
