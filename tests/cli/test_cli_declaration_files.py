@@ -65,6 +65,20 @@ def test_a_bad_load_timeout_setting_is_one_line(tmp_path, capsys, monkeypatch):
     refused(["models", "--model-file", model], capsys, "HFRAME_ID_LOAD_TIMEOUT", "soon")
 
 
+def _models_under_half_a_second(model, code: str) -> subprocess.CompletedProcess:
+    """``hframe-id models --model-file MODEL`` with ``code`` in it and a 0.5 s load timeout,
+    in a process of its own (the timer needs the main thread, which a pytest-xdist worker may
+    not run tests on); 120 s at most."""
+    model.write_text(code)
+    return subprocess.run(
+        [sys.executable, "-m", "hframe_id", "models", "--model-file", str(model)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "HFRAME_ID_LOAD_TIMEOUT": "0.5"},
+        timeout=120,
+    )
+
+
 @pytest.mark.parametrize(
     "code",
     [
@@ -75,19 +89,9 @@ def test_a_bad_load_timeout_setting_is_one_line(tmp_path, capsys, monkeypatch):
     ids=["busy-loop", "swallowing-sleep"],
 )
 def test_a_file_hanging_at_import_times_out(tmp_path, code):
-    # In a process of its own: the timer needs the main thread, which a pytest-xdist worker
-    # may not run tests on.
     model = tmp_path / "hangs.py"
-    model.write_text(code)
-    env = {**os.environ, "HFRAME_ID_LOAD_TIMEOUT": "0.5"}
     start = time.monotonic()
-    done = subprocess.run(
-        [sys.executable, "-m", "hframe_id", "models", "--model-file", str(model)],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=120,
-    )
+    done = _models_under_half_a_second(model, code)
     assert time.monotonic() - start < 60  # generous: the limit is 0.5 s plus start-up
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
@@ -108,16 +112,7 @@ def test_a_file_hanging_at_import_times_out(tmp_path, code):
 def test_a_file_defeating_the_load_timer_still_ends(tmp_path, code):
     """A file that defeats the timer (catches its exception in a loop, ignores SIGALRM,
     stops the timer) used to hang the command for ever: it ends LOAD_GRACE_S later."""
-    model = tmp_path / "stubborn.py"
-    model.write_text(code)
-    env = {**os.environ, "HFRAME_ID_LOAD_TIMEOUT": "0.5"}
-    done = subprocess.run(
-        [sys.executable, "-m", "hframe_id", "models", "--model-file", str(model)],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=60,
-    )
+    done = _models_under_half_a_second(tmp_path / "stubborn.py", code)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "still running after 0.5 s" in lines[0], done.stderr
