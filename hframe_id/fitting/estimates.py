@@ -137,13 +137,6 @@ def fit_result(problem, ms, gn, state, stages, stats, held, start, regression=No
     success = final.converged
     if not final.converged:
         message = f"did not converge: {final.message}"
-    elif len(not_identified) == len(problem.free_names):
-        # The written file would be the start: no success (a record without excitation).
-        success = False
-        message = (
-            "the data determine none of the free parameters (each held at its initial "
-            f"value: {', '.join(not_identified)}): record an experiment that excites them"
-        )
     else:
         message = final.message
         message += at_bound_clause(at_bound)
