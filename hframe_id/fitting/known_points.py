@@ -41,7 +41,8 @@ Each known point enters with the fit's fixed parameters and its own values of th
 clipped into the user's bounds, not into the default box drawn around the start
 (``fit._known_candidates``). A point counts as better when its criterion is lower by more
 than ``open_ended.LIKELIHOOD_RATIO_95`` (1.92: significant at 95 %). A fit that failed is
-continued from the best point other than its start.
+continued from each point other than its start, best first, until a continuation succeeds
+no worse than the failed fit's end (``fit._never_worse_than_known``).
 """
 
 from __future__ import annotations
@@ -155,8 +156,9 @@ def judged_starts(result) -> tuple[list[np.ndarray | None], ...]:
     """The initial states the points are judged from by a ``FitResult``'s ``Criterion``, as
     per-record lists: the fit's estimates; for a fit that failed also the replay's rest state
     (None) for each record at rest, with the fit's estimate for one that starts in motion
-    (module docstring). (Both for every fit doubled the simulations: ``make fit`` 1.45 ->
-    1.65 s.)"""
+    (module docstring). (Both for every fit doubled the simulations: ``make fit`` took
+    1.58-1.83 s against 1.47-1.54 s, paired runs; a converged fit's estimated states are its
+    optimum's.)"""
     own = list(result.initial_states)
     if result.success:
         return (own,)
