@@ -16,9 +16,11 @@ reason, so that ``hframe-id COMMAND --help`` answers at once.
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
 import os
 import sys
+import threading
 import warnings
 from collections.abc import Sequence
 
@@ -153,8 +155,56 @@ def _detach_stdout() -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``hframe-id`` command: parse ``argv`` (default: the process's arguments), run the
     chosen subcommand and return its exit status (0 success, 1 a fit or check that failed,
-    2 bad input, 130 Ctrl-C or SIGTERM, each reported in one line)."""
-    argv = sys.argv[1:] if argv is None else list(argv)
+    2 bad input, 130 Ctrl-C or SIGTERM, each reported in one line).
+
+    Without ``argv`` the command is the process (the console script, ``python -m
+    hframe_id``): if a model or controller file left a thread running, the process ends
+    with the status at once rather than wait for it (``_end_despite_threads``).
+    """
+    code = _command(sys.argv[1:] if argv is None else list(argv))
+    if argv is None:
+        _end_despite_threads(code)
+    return code
+
+
+def _end_despite_threads(code: int) -> None:
+    """End the process with ``code`` now if a thread that a model or controller file started
+    still runs: at exit Python waits for every thread that is not a daemon, so a file's
+    ``threading.Thread(target=...).start()`` would keep the finished command alive for as
+    long as the thread runs (for ever, for a server loop). The exit handlers (the native-code
+    cache's scratch folder) are run and the output flushed first, then ``os._exit``, which
+    does not wait. A command that succeeded or reported a failed check says so in one
+    warning line; a refused one already has its one error line."""
+    waiting = [
+        t
+        for t in threading.enumerate()
+        if t is not threading.main_thread() and t.is_alive() and not t.daemon
+    ]
+    if not waiting:
+        return
+    from hframe_id.models.user import threads_left_running  # loaded: the files were
+
+    left = threads_left_running()
+    if not left:
+        return  # the command's own, which it ends itself
+    if code in (0, 1):
+        file, thread = left[0]
+        print(
+            f"hframe-id: warning: {file} left a thread running ({shown(thread.name)}); "
+            "the command ends without waiting for it",
+            file=sys.stderr,
+        )
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # closed (a broken pipe), or a full disk: as at exit
+            pass
+    os._exit(code)
+
+
+def _command(argv: list[str]) -> int:
+    """``main``'s work: the subcommand run and every way it ends reported."""
     try:
         with signals.handled():
             try:

@@ -40,7 +40,7 @@ from hframe_id.control.declaration import (
 )
 from hframe_id.errors import ControllerError
 from hframe_id.models.spec import Signal
-from hframe_id.models.user import error_line, guarded, run_declaration_file
+from hframe_id.models.user import error_line, guarded, load_guarded, run_declaration_file
 
 
 def declare_controller(
@@ -81,8 +81,13 @@ def declare_controller(
 def load_controller_file(path: str | Path) -> ControllerDeclaration:
     """Load a controller file and check it by tracing its law.
 
-    Every problem is a one-line ``ControllerError`` naming the file and the item.
+    Every problem, however the file's code ends (``hframe_id.models.user.load_guarded``), is
+    a one-line ``ControllerError`` naming the file and the item.
     """
+    return load_guarded(path, "controller file", ControllerError, _load_controller_file)
+
+
+def _load_controller_file(path: Path) -> ControllerDeclaration:
     path, module = run_declaration_file(path, "controller file", ControllerError)
     declared = getattr(module, "CONTROLLER", None)
     if not isinstance(declared, ControllerDeclaration):

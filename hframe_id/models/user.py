@@ -20,16 +20,19 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+import select
 import signal
 import sys
 import threading
 import traceback
+import warnings
+import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, TypeVar
 
 import casadi as ca
 
@@ -45,6 +48,7 @@ REQUIRED_KEYS = ("kinetic", "potential")
 OPTIONAL_KEYS = ("forces", "friction")
 
 Equations = Callable[..., Mapping[str, Any]]
+T = TypeVar("T")
 
 
 class DeclaredSymbols(Mapping[str, ca.SX]):
@@ -198,11 +202,6 @@ def error_line(err: BaseException, path: Path) -> str:
 LOAD_TIMEOUT_S = 30.0
 
 
-class _LoadTimeout(BaseException):
-    """Raised into a file's code by the load timer (a BaseException, so that a file's
-    ``except Exception`` cannot swallow it)."""
-
-
 def load_timeout_s() -> float:
     """The load timeout [s]: ``$HFRAME_ID_LOAD_TIMEOUT`` if set, else ``LOAD_TIMEOUT_S``.
 
@@ -223,68 +222,6 @@ def load_timeout_s() -> float:
     return value
 
 
-def _timer_usable() -> bool:
-    """Whether ``_timer`` can interrupt this thread (the main thread, where signals come)."""
-    return hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
-
-
-@contextmanager
-def _timer(seconds: float) -> Iterator[None]:
-    """Raise ``_LoadTimeout`` in the block after ``seconds`` (0: never).
-
-    A real-time interval timer (``setitimer``) whose SIGALRM handler raises: Python runs the
-    handler between two bytecodes of the file's code, and a blocking call (``time.sleep``,
-    a socket read) is interrupted and not resumed (PEP 475: the handler's exception ends
-    it). Only the main thread receives signals, so elsewhere (a Dask worker's thread) and
-    on Windows the block runs without a limit; C code that never returns to Python (a
-    CasADi call that does not end) is not interrupted either. The previous handler and
-    timer are put back afterwards.
-    """
-    if not (seconds > 0 and _timer_usable()):
-        yield
-        return
-
-    def expire(signum: int, frame: object) -> None:
-        raise _LoadTimeout
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-#: Seconds a file may run beyond the load timeout when it defeats the timer (catches its
-#: exception in a loop, ignores SIGALRM or stops the timer) before the process is ended.
-LOAD_GRACE_S = 2.0
-
-
-@contextmanager
-def _last_resort(seconds: float, line: str) -> Iterator[None]:
-    """End the process with the error ``line`` and exit status 2 if the block still runs
-    after ``seconds`` (0: never): for a file that defeats ``_timer``, which nothing else can
-    stop. A daemon thread, cancelled when the block ends; the command line's outputs are
-    written after the files are loaded, so none is left half-made. Where ``_timer`` does
-    not run (a Dask worker's thread) neither does this: the load has no limit there."""
-    if not (seconds > 0 and _timer_usable()):
-        yield
-        return
-
-    def expire() -> None:
-        print(f"hframe-id: error: {line}", file=sys.__stderr__, flush=True)
-        os._exit(2)
-
-    watchdog = threading.Timer(seconds, expire)
-    watchdog.daemon = True
-    watchdog.start()
-    try:
-        yield
-    finally:
-        watchdog.cancel()
-
-
 def _hanging(kind: str, path: Path, seconds: float) -> str:
     return (
         f"{kind} {path}: still running after {seconds:g} s (a loop or a wait at import?); "
@@ -295,22 +232,16 @@ def _hanging(kind: str, path: Path, seconds: float) -> str:
 @contextmanager
 def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iterator[None]:
     """Run a model or controller file's code (``kind``: ``"model file"``, ...) so that every
-    way it can end is one ``error`` naming the file: an exception (with the file's line; any
-    ``BaseException``, ``GeneratorExit`` too), ``sys.exit`` (any status, 0 too), a
-    ``KeyboardInterrupt`` it raises itself, or running longer than ``load_timeout_s()``. A
-    file that defeats the timer ends the process ``LOAD_GRACE_S`` later with the same line
-    (``_last_resort``). The user's own Ctrl-C or SIGTERM (``Interrupted``) passes through,
-    to end the command. Only ``os._exit`` in the file escapes: it ends the process at once."""
-    seconds = load_timeout_s()
+    way it can end and come back to Python is one ``error`` naming the file: an exception
+    (with the file's line; any ``BaseException``, ``GeneratorExit`` too), ``sys.exit`` (any
+    status, 0 too) or a ``KeyboardInterrupt`` it raises itself. The user's own Ctrl-C or
+    SIGTERM (``Interrupted``) passes through, to end the command. The ways that do not come
+    back (``os._exit``, a crash, a hang) are found before, by ``load_guarded``'s probe."""
     try:
-        with _last_resort(seconds and seconds + LOAD_GRACE_S, _hanging(kind, path, seconds)):
-            with _timer(seconds):
-                yield
+        yield
     except ModelError as err:
         message = str(err)
         raise error(message if str(path) in message else f"{path}: {message}") from None
-    except _LoadTimeout:
-        raise error(_hanging(kind, path, seconds)) from None
     except SystemExit as err:
         raise error(f"{kind} {path}: calls sys.exit({shown(err.code)}) while loaded") from None
     except Interrupted:
@@ -321,20 +252,155 @@ def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iter
         raise error(f"{kind} {path}: {error_line(err, path)}") from None
 
 
+def _probe_usable() -> bool:
+    """Whether ``_probe`` can run here: a POSIX ``fork``, from the main thread.
+
+    Not from other threads (a Dask worker's): forking a process whose other threads may hold
+    locks the child then needs can hang the child, which would read as the file hanging.
+    The command line loads its files on the main thread; its other threads (the signal
+    watchdog, progress timers) wait in calls that hold no lock the child takes.
+    """
+    return hasattr(os, "fork") and threading.current_thread() is threading.main_thread()
+
+
+def _flush_standard_streams() -> None:
+    """Write out what the process has buffered, so that the forked child holds none of it."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):  # None, closed, or a broken pipe
+            pass
+
+
+def _probe_child(load: Callable[[], object], writer: int) -> None:
+    """The forked child: run ``load`` with its output discarded, report on ``writer`` that
+    it came back, however it ended, and end without running anything of the parent's
+    (exit handlers, buffered output): ``os._exit``."""
+    try:
+        # a signal the child receives must not reach the parent's signal watchdog, which
+        # would end the parent as interrupted (``hframe_id.cli.signals``)
+        signal.set_wakeup_fd(-1)
+        devnull = os.open(os.devnull, os.O_RDWR)
+        for descriptor in (0, 1, 2):  # the parent's input is not the file's to read
+            os.dup2(devnull, descriptor)
+        sys.stdout = sys.stderr = open(devnull, "w", closefd=False)  # noqa: SIM115
+        try:
+            load()
+        except BaseException:  # the parent runs it again and reports what it raises
+            pass
+        os.write(writer, b"ok")
+    finally:
+        os._exit(0)
+
+
+def _probe(kind: str, path: Path, seconds: float, load: Callable[[], object]) -> str | None:
+    """Run ``load`` in a forked child first: the error line for what the file's code does
+    there that a process cannot survive or catch (``None``: it came back, with a result or
+    an exception, within ``seconds``; 0: no limit).
+
+    ``os._exit`` and a crash end the process at once and a hang defeats any handler, so
+    only another process can see them; a fork is a copy of this one (CasADi and the models
+    already imported), so the probe costs about the time of the load itself. The child's
+    output is discarded: the file runs again in this process afterwards, and prints there.
+    """
+    reader, writer = os.pipe()
+    _flush_standard_streams()
+    with warnings.catch_warnings():
+        # Python 3.12+ warns of forking a process with threads; the child runs only the
+        # file's code (``_probe_usable``)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
+    if pid == 0:
+        os.close(reader)
+        _probe_child(load, writer)
+    os.close(writer)
+    reaped = False
+    try:
+        poller = select.poll()
+        poller.register(reader, select.POLLIN)
+        if not poller.poll(seconds * 1000 if seconds > 0 else None):
+            return _hanging(kind, path, seconds)
+        came_back = os.read(reader, 2) == b"ok"
+        _, status = os.waitpid(pid, 0)
+        reaped = True
+    finally:
+        os.close(reader)
+        if not reaped:  # a hang, or this process interrupted while it waited
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+    if came_back:
+        return None
+    if os.WIFSIGNALED(status):
+        ending = f"kills the process ({signal.Signals(os.WTERMSIG(status)).name})"
+    else:
+        ending = f"ends the process at once (os._exit({os.waitstatus_to_exitcode(status)}))"
+    return f"{kind} {path}: {ending} while loaded"
+
+
+#: Threads that model and controller files started while they were loaded and left
+#: running, by the file ("model file /path/m.py"): a fact about the process, which the
+#: command line reads when it ends (``threads_left_running``).
+_LEFT_RUNNING: weakref.WeakKeyDictionary[threading.Thread, str] = weakref.WeakKeyDictionary()
+
+
+def threads_left_running() -> list[tuple[str, threading.Thread]]:
+    """The threads a loaded file started that still run and would keep the process alive
+    at exit (not daemons), with the file that started each ("model file /path/m.py")."""
+    return [
+        (file, thread)
+        for thread, file in list(_LEFT_RUNNING.items())
+        if thread.is_alive() and not thread.daemon
+    ]
+
+
+def _checked_source(path: str | Path, kind: str, error: type[ModelError]) -> Path:
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise error(f"{kind} {path} does not exist")
+    if path.suffix != ".py":
+        raise error(f"{kind} {path}: expected a Python file (.py), got {path.suffix!r}")
+    return path
+
+
+def load_guarded(
+    path: str | Path, kind: str, error: type[ModelError], load: Callable[[Path], T]
+) -> T:
+    """``load(path)`` (import a model or controller file, check what it declares) so that
+    however the file's code ends it is one ``error`` line naming the file.
+
+    First in a forked child (``_probe``; on POSIX, from the main thread): a file that ends
+    the process there (``os._exit``, a crash) or still runs after ``load_timeout_s()`` is
+    refused before it runs here. Then here, under ``guarded`` for the endings a process can
+    catch. Elsewhere (another thread, Windows) only the second step runs, without a time
+    limit. Threads the file starts and leaves running are noted (``threads_left_running``).
+    """
+    path = _checked_source(path, kind, error)
+    seconds = load_timeout_s()
+    if _probe_usable():
+        problem = _probe(kind, path, seconds, lambda: load(path))
+        if problem:
+            raise error(problem)
+    before = set(threading.enumerate())
+    try:
+        return load(path)
+    finally:
+        for thread in threading.enumerate():
+            if thread not in before and not thread.daemon:
+                _LEFT_RUNNING[thread] = f"{kind} {path}"
+
+
 def run_declaration_file(
     path: str | Path, kind: str, error: type[ModelError] = ModelError
 ) -> tuple[Path, ModuleType]:
     """Execute a model or controller file (``kind``: ``"model file"``, ``"controller file"``)
     as a module of its own; returns its resolved path and the module.
 
-    Every problem (no such file, not Python, any way its code can end: ``guarded``) is one
-    ``error`` line naming the file, and the line of the file for a Python error.
+    Every problem (no such file, not Python, any way its code can end that comes back to
+    Python: ``guarded``) is one ``error`` line naming the file, and the line of the file for
+    a Python error. Loaders call it inside ``load_guarded``, which also catches the ways
+    that do not come back.
     """
-    path = Path(path).resolve()
-    if not path.is_file():
-        raise error(f"{kind} {path} does not exist")
-    if path.suffix != ".py":
-        raise error(f"{kind} {path}: expected a Python file (.py), got {path.suffix!r}")
+    path = _checked_source(path, kind, error)
     module_name = f"hframe_id_{kind.replace(' ', '_')}_{abs(hash(str(path)))}"
     spec = importlib.util.spec_from_file_location(module_name, path)
     module = importlib.util.module_from_spec(spec)
@@ -357,8 +423,13 @@ def sibling_module(model_file: str | Path, file_name: str) -> ModuleType:
 def load_model_file(path: str | Path) -> ModelDeclaration:
     """Load a model file, check it by deriving its equations, and register its declaration.
 
-    Every problem is a one-line ``ModelError`` naming the file and the item.
+    Every problem, however the file's code ends (``load_guarded``), is a one-line
+    ``ModelError`` naming the file and the item.
     """
+    return load_guarded(path, "model file", ModelError, _load_model_file)
+
+
+def _load_model_file(path: Path) -> ModelDeclaration:
     from hframe_id.models.model import freeze
     from hframe_id.models.registry import register
 

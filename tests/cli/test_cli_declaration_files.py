@@ -1,7 +1,8 @@
 """Model and controller files loaded in a guarded way (issue 27, item 4): however a file's code
 ends while it is loaded (an exception, ``sys.exit`` with any status, a ``KeyboardInterrupt``
-of its own, or running past the load timeout) the command prints one ``hframe-id: error:``
-line naming the file, exits 2 and writes nothing."""
+of its own, ``os._exit``, a crash, or running past the load timeout) the command prints one
+``hframe-id: error:`` line naming the file, exits 2 and writes nothing; a thread the file
+leaves running does not keep the finished command alive."""
 
 from __future__ import annotations
 
@@ -110,8 +111,9 @@ def test_a_file_hanging_at_import_times_out(tmp_path, code):
     ids=["swallows-every-exception", "ignores-sigalrm", "stops-the-timer"],
 )
 def test_a_file_defeating_the_load_timer_still_ends(tmp_path, code):
-    """A file that defeats the timer (catches its exception in a loop, ignores SIGALRM,
-    stops the timer) used to hang the command for ever: it ends LOAD_GRACE_S later."""
+    """A file that defeats a timer in its own process (catches its exception in a loop,
+    ignores SIGALRM, stops the timer) used to hang the command for ever: the probe's child
+    is killed at the limit, whatever the file does."""
     done = _models_under_half_a_second(tmp_path / "stubborn.py", code)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
@@ -124,3 +126,118 @@ def test_a_file_raising_generator_exit_is_one_line(tmp_path, capsys):
     model = tmp_path / "odd.py"
     model.write_text("raise GeneratorExit\n")
     refused(["models", "--model-file", model], capsys, model, "GeneratorExit (line 1)")
+
+
+def _hframe_id(argv: list, timeout: float = 120) -> subprocess.CompletedProcess:
+    """The command in a process of its own (``python -m hframe_id``, which owns the process
+    as the console script does): a file ending the process must not end pytest's."""
+    return subprocess.run(
+        [sys.executable, "-m", "hframe_id", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def _one_error_line(done: subprocess.CompletedProcess, *named) -> str:
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hframe-id: error: "), done.stderr
+    for word in named:
+        assert str(word) in lines[0], lines[0]
+    return lines[0]
+
+
+#: Code that ends the process at import, which no handler in the process can catch, and the
+#: words of its error line.
+PROCESS_ENDINGS = {
+    "os-exit-0": ("import os\nos._exit(0)\n", "ends the process at once (os._exit(0))"),
+    "os-exit-3": ("import os\nos._exit(3)\n", "ends the process at once (os._exit(3))"),
+    "killed": (
+        "import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n",
+        "kills the process (SIGKILL)",
+    ),
+}
+
+
+@pytest.mark.parametrize("ending", PROCESS_ENDINGS)
+def test_a_model_file_ending_the_process_at_import_is_one_line(tmp_path, ending):
+    """``os._exit(0)`` at import used to end the command at once with exit status 0 and no
+    output: the file is run in a forked child first, which reports whether it came back."""
+    code, words = PROCESS_ENDINGS[ending]
+    model = tmp_path / "model.py"
+    model.write_text(code)
+    done = _hframe_id(["models", "--model-file", model])
+    _one_error_line(done, "model file", model, words, "while loaded")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.py"]
+
+
+@pytest.mark.parametrize("ending", PROCESS_ENDINGS)
+def test_a_controller_file_ending_the_process_at_import_is_one_line(tmp_path, ending):
+    code, words = PROCESS_ENDINGS[ending]
+    controller = tmp_path / "controller.py"
+    controller.write_text(code)
+    argv = ["control", "--params", EMPS_PARAMS, "--model-file", EMPS_MODEL]
+    argv += ["--controller", controller, "--reference", tmp_path / "none.mcap"]
+    _one_error_line(_hframe_id(argv), "controller file", controller, words)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["controller.py"]
+
+
+def test_a_model_whose_equations_end_the_process_is_one_line(tmp_path):
+    """The probe covers the whole load: deriving the equations calls the file's code too."""
+    shutil.copy(EMPS_PARAMS, tmp_path)
+    model = tmp_path / "exits.py"
+    exits = "def equations(*args):\n    import os\n    os._exit(0)\n\n\ndef _equations("
+    model.write_text(EMPS_MODEL.read_text().replace("def equations(", exits, 1))
+    _one_error_line(_hframe_id(["models", "--model-file", model]), model, "os._exit(0)")
+
+
+def test_a_files_output_at_import_is_shown_once(tmp_path):
+    """The probe's child discards its output: the file prints once, when run for real."""
+    model = tmp_path / "model.py"
+    model.write_text("print('hello from the model file')\nMODEL = 1\n")
+    done = _hframe_id(["models", "--model-file", model])
+    _one_error_line(done, model, "defines no MODEL")
+    assert done.stdout.count("hello from the model file") == 1, done.stdout
+
+
+#: A thread that is not a daemon and would run for 300 s.
+THREAD = (
+    "import threading, time\n"
+    "threading.Thread(target=time.sleep, args=(300,), name='spin').start()\n"
+)
+
+
+def test_a_thread_left_by_a_model_file_does_not_keep_the_command_alive(tmp_path):
+    """A thread the file starts (not a daemon) used to keep the process alive after the
+    command, as Python waits for such threads at exit: the command ends at once with its
+    status and one warning line."""
+    shutil.copy(EMPS_PARAMS, tmp_path)
+    model = tmp_path / "spins.py"
+    model.write_text(EMPS_MODEL.read_text() + "\n" + THREAD)
+    start = time.monotonic()
+    done = _hframe_id(["models", "--model-file", model], timeout=100)
+    assert time.monotonic() - start < 60  # generous: start-up; the thread runs 300 s
+    assert done.returncode == 0, done.stderr
+    assert "emps-axis" in done.stdout
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith("hframe-id: warning: model file") and str(model) in lines[0]
+    assert "left a thread running ('spin')" in lines[0]
+
+
+@pytest.mark.parametrize("kind", ["model", "controller"])
+def test_a_thread_left_by_a_refused_file_does_not_keep_the_command_alive(tmp_path, kind):
+    """A refused file: its one error line, exit 2, and no wait for its thread."""
+    source = tmp_path / f"{kind}.py"
+    source.write_text(THREAD)  # no MODEL, no CONTROLLER: refused after it ran
+    if kind == "model":
+        argv = ["models", "--model-file", source]
+    else:
+        argv = ["control", "--params", EMPS_PARAMS, "--model-file", EMPS_MODEL]
+        argv += ["--controller", source, "--reference", tmp_path / "none.mcap"]
+    start = time.monotonic()
+    done = _hframe_id(argv, timeout=100)
+    assert time.monotonic() - start < 60
+    _one_error_line(done, f"{kind} file", source, "defines no")
