@@ -307,11 +307,16 @@ def _probe(kind: str, path: Path, seconds: float, load: Callable[[], object]) ->
     """
     reader, writer = os.pipe()
     _flush_standard_streams()
-    with warnings.catch_warnings():
-        # Python 3.12+ warns of forking a process with threads; the child runs only the
-        # file's code (``_probe_usable``)
-        warnings.simplefilter("ignore", DeprecationWarning)
-        pid = os.fork()
+    try:
+        with warnings.catch_warnings():
+            # Python 3.12+ warns of forking a process with threads; the child runs only the
+            # file's code (``_probe_usable``)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            pid = os.fork()
+    except OSError:  # no process to spare (EAGAIN, ENOMEM): the load runs here only
+        os.close(reader)
+        os.close(writer)
+        return None
     if pid == 0:
         os.close(reader)
         _probe_child(load, writer)

@@ -60,3 +60,16 @@ def test_a_thread_left_running_is_noted_with_its_file(tmp_path):
     stop.touch()
     left[0][1].join(10)
     assert not any(t.name == "waiter" for _, t in threads_left_running())
+
+
+def test_no_process_to_spare_loads_the_file_here(tmp_path, monkeypatch):
+    """A fork that fails (EAGAIN: no process to spare) leaves the load to this process."""
+
+    def no_fork():
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    model = tmp_path / "model.py"
+    model.write_text("MODEL = 1\n")
+    with pytest.raises(ModelError, match="defines no MODEL"):
+        load_model_file(model)
