@@ -22,7 +22,7 @@ from hframe_id.parameters import load_parameter_file
 from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.recordings.simulated import simulate_recording
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 REDUCED_LABEL = "truth (section-4.1 reduction of the plant)"
 
 

@@ -15,7 +15,7 @@ from hframe_id.fitting.solver import GaussNewton
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 IDLER = ("J_2", "B_2", "tau_c2")
 
 

@@ -17,7 +17,7 @@ from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.protocols import StepProtocol
 from hframe_id.rig.realistic import record_realistic, shipped_plant
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 
 
 def test_consider_covariance_is_the_spread_of_estimates_under_held_errors():

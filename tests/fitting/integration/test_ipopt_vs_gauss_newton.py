@@ -27,7 +27,7 @@ from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 FREE = ("k_l", "k_r", "b_cart", "M_bridge")
 THETA_TOL = 1e-5
 COST_TOL = 1.0
