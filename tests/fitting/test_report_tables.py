@@ -1,12 +1,14 @@
-"""The fit report's correlation section: groups of strongly correlated parameters, said in words,
-and the heat map with its values in the cells."""
+"""The fit report's sections from the fit alone (``fitting.report_tables``): groups of strongly
+correlated parameters, said in words."""
 
 from types import SimpleNamespace
 
 import numpy as np
 
-from hframe_id.fitting.report_figures import plot_correlation
-from hframe_id.fitting.report_tables import correlated_groups, correlation_lines
+from hframe_id.fitting.report_tables import (
+    correlated_groups,
+    correlation_lines,
+)
 
 
 def _result(correlation, identified_by=None):
@@ -44,17 +46,3 @@ def test_a_sentence_per_group_with_design_advice_when_the_fitter_gave_any():
 
 def test_uncorrelated_parameters_are_said_to_be_so():
     assert correlation_lines(_result(np.eye(4))) == ["No two free parameters have |r| >= 0.9."]
-
-
-def test_heat_map_has_a_number_in_every_cell_below_the_diagonal(tmp_path, monkeypatch):
-    from matplotlib.axes import Axes
-
-    texts = []
-    original = Axes.text
-    monkeypatch.setattr(
-        Axes, "text", lambda ax, *a, **k: texts.append(a[2]) or original(ax, *a, **k)
-    )
-    plot_correlation(np.array(CHAIN), _result(CHAIN).free_names, tmp_path / "c.png")
-    assert (tmp_path / "c.png").stat().st_size > 0
-    # the matrix is symmetric with a unit diagonal: each of its 6 values once
-    assert sorted(texts) == sorted(["0.97", "0.50", "0.10", "-0.93", "0.00", "0.20"])

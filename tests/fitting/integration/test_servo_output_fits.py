@@ -1,21 +1,15 @@
-"""Fits of outputs that are not coordinates (``Output`` declarations, docs/custom-models.md): a
-DC servo's tachometer speed alone, with its angle, and with its armature current, recovered
-from simulated records with known parameters; the output map's Jacobians are exact; each
-channel's noise comes from the declaration, the rig or the residuals."""
+"""Whole fits of outputs that are not coordinates (``Output`` declarations,
+docs/custom-models.md): a DC servo's tachometer speed alone, with its angle, and with its
+armature current, recovered from simulated records with known parameters; each channel's noise
+estimated from the residuals; the NLP solvers refuse an output that is no state."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from servo_outputs import NOISE, TRUTH, servo_model_file, servo_recording, start
 
-from hframe_id.errors import FitError, OptionError
+from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.dataset import output_kinds, starts_at_rest
-from hframe_id.fitting.experiment import default_channel_std
-from hframe_id.fitting.problem import build_problem
-from hframe_id.fitting.shooting import MultipleShooting
-from hframe_id.models import build_model
 
 
 @pytest.fixture(scope="module")
@@ -71,50 +65,6 @@ def test_the_nlp_solvers_refuse_an_output_that_is_no_state(servo):
         )
 
 
-def test_the_residual_jacobians_of_a_general_output_map_are_exact(servo):
-    name = servo("shipped")
-    problem = build_problem(
-        [servo_recording(name, 3, n=300)], start(name), FitOptions(verbose=0, shooting_interval=20)
-    )
-    ms = MultipleShooting(problem)
-    assert ms._output_index is None  # the current is no state: the general output map
-    nodes, _ = ms.initial_nodes(problem.p_initial)
-    theta = np.array([0.1, -0.2, 0.05, 0.03])  # J, B, tau_c, g moved off the start
-    nodes = nodes + np.array([0.0, 3.0])  # and the speeds off the measurements
-    ev = ms.evaluate(nodes, theta, problem.smoothing)
-    # Central differences (step 1e-6 in log p, 1e-4 rad/s): truncation ~h^2 / 6 f''' and
-    # round-off ~1e-16 / h relative, both below 1e-6 of the largest entry; the tolerance is
-    # 1e-5 of it.
-    for i in range(theta.size):
-        h = 1e-6
-        up = ms.evaluate(nodes, theta + h * np.eye(theta.size)[i], problem.smoothing)
-        down = ms.evaluate(nodes, theta - h * np.eye(theta.size)[i], problem.smoothing)
-        numeric = (up.residual - down.residual) / (2 * h)
-        scale = np.abs(numeric).max()
-        np.testing.assert_allclose(ev.jac_theta[..., i], numeric, rtol=0, atol=1e-5 * scale)
-    h = 1e-4
-    step = np.zeros_like(nodes)
-    step[:, 1] = h
-    up = ms.evaluate(nodes + step, theta, problem.smoothing, derivatives=False)
-    down = ms.evaluate(nodes - step, theta, problem.smoothing, derivatives=False)
-    numeric = (up.residual - down.residual) / (2 * h)
-    np.testing.assert_allclose(
-        ev.jac_node[..., 1], numeric, rtol=0, atol=1e-5 * np.abs(numeric).max()
-    )
-
-
-def test_noise_comes_from_the_rig_then_the_declaration(servo):
-    name = servo("shipped")
-    model = build_model(name)
-    declared = servo_recording(name, 4, n=200)
-    assert default_channel_std(declared, "omega", model) == 0.5  # models/dc_servo.py
-    assert default_channel_std(declared, "current", model) == 0.01
-    rig = servo_recording(name, 4, n=200, rig={"noise_std_omega": 0.2})
-    assert default_channel_std(rig, "omega", model) == 0.2  # the rig's own sensor wins
-    with pytest.raises(FitError, match="noise_std in the model's Output declaration"):
-        default_channel_std(declared, "omega")  # no model: nothing declares it
-
-
 def test_the_residuals_estimate_each_channels_noise(servo):
     name = servo("angle-speed")
     result = fit_recordings(
@@ -127,17 +77,3 @@ def test_the_residuals_estimate_each_channels_noise(servo):
     # The rms of 2000 residuals estimates each noise std within 2 sqrt(1 / (2 N)) = 3 %.
     for output in ("theta", "omega"):
         assert channels[output].residual_rms == pytest.approx(NOISE[output], rel=0.03)
-
-
-def test_a_speed_shows_rest_by_its_value(servo):
-    model = build_model(servo("shipped"))
-    assert output_kinds(model) == ("rate", "other")
-    dt, std = 1e-3, np.array([0.5])
-    valid = np.ones((10, 1), dtype=bool)
-    still = np.random.default_rng(6).normal(0.0, 0.5, (10, 1))
-    turning = still + 100.0  # a constant 100 rad/s: no slope, but not at rest
-    assert starts_at_rest(still, valid, std, 10, dt, ("rate",))
-    assert not starts_at_rest(turning, valid, std, 10, dt, ("rate",))
-    assert starts_at_rest(turning, valid, std, 10, dt)  # read as a position, it is still
-    # A current alone cannot tell rest from motion: rest is not assumed.
-    assert not starts_at_rest(still, valid, std, 10, dt, ("other",))
