@@ -18,3 +18,14 @@ def test_consider_covariance_is_the_spread_of_estimates_under_held_errors():
     predicted = consider_covariance(a_mat, c_mat, std)
     # 20000 draws: sampling error of a covariance ~ sqrt(2 / 20000) = 1 % of its scale.
     assert np.allclose(np.cov(estimates.T), predicted, rtol=0.05, atol=0.03 * predicted.max())
+
+
+def test_a_held_column_the_estimates_cannot_absorb_adds_nothing_and_a_copy_adds_its_prior():
+    """S = -(J_a^T J_a)^-1 J_a^T J_c: a held column orthogonal to the estimated ones moves no
+    estimate; a held column equal to estimated column 0 moves that estimate one for one
+    (S = -e_0), so its variance gains the prior's sigma^2 and nothing else does."""
+    a_mat = np.linalg.qr(np.random.default_rng(3).normal(size=(50, 4)))[0]
+    orthogonal, estimated = a_mat[:, 3:], a_mat[:, :3]
+    np.testing.assert_allclose(consider_covariance(estimated, orthogonal, [0.2]), 0, atol=1e-15)
+    added = consider_covariance(estimated, estimated[:, :1] * 2.0, np.array([0.1]))
+    np.testing.assert_allclose(added, np.diag([0.2**2, 0.0, 0.0]), atol=1e-14)

@@ -8,6 +8,7 @@ import pytest
 
 from hframe_id.fitting import FitOptions
 from hframe_id.fitting.equation_error import (
+    _robust_gauss_newton,
     convolve_zero_padded,
     equation_error_start,
     savgol_derivative,
@@ -75,3 +76,39 @@ def test_zero_padded_convolution_is_scipy_bit_for_bit(weights):
     np.testing.assert_array_equal(
         convolve_zero_padded(y, np.array(weights)), convolve1d(y, weights, mode="constant")
     )
+
+
+def test_savitzky_golay_derivatives_of_a_cubic_are_exact_in_the_interior():
+    """Order 3 fits a cubic exactly over every window: its first and second derivatives come
+    out exact (to rounding: the weights ~1/dt^2 = 1e6 times values of order 1)."""
+    dt = 1e-3
+    t = np.arange(200) * dt
+    y = t**3 - 2 * t**2 + t
+    for window in (5, 11):
+        half = window // 2
+        inner = slice(half, -half)
+        first = savgol_derivative(y, window, 3, 1, dt)[inner]
+        second = savgol_derivative(y, window, 3, 2, dt)[inner]
+        np.testing.assert_allclose(first, (3 * t**2 - 4 * t + 1)[inner], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(second, (6 * t - 4)[inner], rtol=0, atol=1e-5)
+
+
+def test_the_robust_regression_recovers_exact_parameters_of_a_linear_model():
+    """Noise-free data of a model linear in its parameters (residual A theta - b, b = A
+    theta_true): the reweighted Levenberg-Marquardt lands on theta_true. It stops on a step
+    below 1e-6 with its damping already down to <= 1e-4 of the curvature, so what is left is
+    far below that step; 1e-7 tests it."""
+    rng = np.random.default_rng(2)
+    a_mat = rng.normal(size=(300, 4))
+    truth = np.array([0.4, -0.7, 1.2, 0.05])
+    b = a_mat @ truth
+
+    def residual(theta):
+        return a_mat @ theta - b, a_mat
+
+    bounds = np.full(4, -5.0), np.full(4, 5.0)
+    theta = _robust_gauss_newton(residual, np.zeros(4), *bounds)
+    np.testing.assert_allclose(theta, truth, rtol=0, atol=1e-7)
+    # A bound below the truth stops that parameter there (the box is respected).
+    upper = np.array([5.0, 5.0, 1.0, 5.0])
+    assert _robust_gauss_newton(residual, np.zeros(4), bounds[0], upper)[2] <= 1.0

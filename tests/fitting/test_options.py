@@ -1,6 +1,7 @@
 """FitOptions (``fitting.options``): every field validated with a message a user can act on,
 the defaults, the frozen parts each component reads and the model's fit defaults."""
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -75,3 +76,42 @@ def test_starts_must_be_a_positive_whole_number():
         FitOptions(starts=0)
     with pytest.raises(OptionError, match="start_seed"):
         FitOptions(start_seed=-1)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"continuity": "loose"}, "continuity must be one of exact, none, got 'loose'"),
+        ({"initial_state": "zero"}, "initial_state must be one of auto, rest, estimate"),
+        ({"latency_samples": {"x": 101}}, "latency_samples['x'] must be a whole number"),
+        ({"substep_safety": 0.5}, "substep_safety must be >= 1, got 0.5"),
+        ({"max_misfit": 0.0}, "max_misfit must be > 0, got 0.0"),
+        ({"threads": 1.5}, "threads must be a whole number, got 1.5"),
+        ({"verbose": 3}, "verbose must be 0, 1 or 2, got 3"),
+        ({"progress": "stderr"}, "progress must be callable"),
+        ({"known_points": ("table.yaml",)}, "known_points must be ParameterSet objects, got str"),
+    ],
+)
+def test_the_settings_chosen_by_name_or_number_are_checked_in_one_line(kwargs, message):
+    with pytest.raises(OptionError) as err:
+        FitOptions(**kwargs)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_defaults_leave_the_transcription_to_the_model_and_are_stored_normalised():
+    options = FitOptions()
+    assert (options.solver, options.noise, options.uncertainty) == (
+        "gauss-newton",
+        "auto",
+        "robust",
+    )
+    assert (options.free, options.shooting_interval, options.continuity) == (None, None, None)
+    described = options.for_model("hframe-8").describe()
+    assert (described["free"], described["consider"]) == ("default", "default")
+    assert (described["shooting_interval_samples"], described["continuity"]) == (10, "exact")
+    # Sequences become tuples, smoothing velocities floats (frozen, hashable parts).
+    given = FitOptions(free=["k_l", "k_*"], smoothing=[1, 2], smoothing_schedule=[4, 1])
+    assert given.free == ("k_l", "k_*") and given.smoothing == (1.0, 2.0)
+    assert given.smoothing_schedule == (4.0, 1.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        given.solver = "ipopt"

@@ -8,6 +8,8 @@ import numpy as np
 from hframe_id.fitting.report_tables import (
     correlated_groups,
     correlation_lines,
+    jackknife_sentence,
+    markdown_table,
 )
 
 
@@ -46,3 +48,32 @@ def test_a_sentence_per_group_with_design_advice_when_the_fitter_gave_any():
 
 def test_uncorrelated_parameters_are_said_to_be_so():
     assert correlation_lines(_result(np.eye(4))) == ["No two free parameters have |r| >= 0.9."]
+
+
+def test_a_markdown_table_has_a_header_a_rule_and_a_row_per_entry():
+    assert markdown_table([("a", "b"), ("1", "2"), ("3", "4")]) == [
+        "| a | b |",
+        "| --- | --- |",
+        "| 1 | 2 |",
+        "| 3 | 4 |",
+    ]
+
+
+def test_the_jackknife_sentence_names_parameters_that_move_more_than_twice_their_error():
+    """JACKKNIFE_RATIO 2: k_l's jackknife std 3x its std error is named with its ratio; k_r's
+    1.5x is not; with none above the ratio, no sentence."""
+    estimates = {
+        "k_l": SimpleNamespace(std_error=10.0),
+        "k_r": SimpleNamespace(std_error=10.0),
+    }
+    result = SimpleNamespace(estimates=estimates)
+    moved = SimpleNamespace(
+        spread=[
+            SimpleNamespace(name="k_l", jackknife_std=30.0),
+            SimpleNamespace(name="k_r", jackknife_std=15.0),
+        ]
+    )
+    (sentence, blank) = jackknife_sentence(result, moved)
+    assert "k_l (3x)" in sentence and "k_r" not in sentence and blank == ""
+    still = SimpleNamespace(spread=[SimpleNamespace(name="k_l", jackknife_std=19.0)])
+    assert jackknife_sentence(result, still) == []
