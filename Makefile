@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed-stamp
 DATA ?= 4V_xmotion.mcap
 FIT_ARGS ?=
 
-.PHONY: venv test test-all lint format fit bench datasets reproduce clean
+.PHONY: venv test test-unit test-all lint format fit bench datasets reproduce clean
 
 venv: $(STAMP)
 
@@ -24,6 +24,11 @@ PYTEST := MPLBACKEND=Agg $(BIN)/python -m pytest -q -n logical --dist loadfile
 
 test: $(STAMP)
 	$(PYTEST) -m "not slow"
+
+# A quick check while editing: the tests not marked `integration` (whole fits and commands;
+# every test in tests/fitting/integration/ is, by its path) or `slow`.
+test-unit: $(STAMP)
+	$(PYTEST) -m "not integration and not slow"
 
 test-all: $(STAMP)
 	$(PYTEST)

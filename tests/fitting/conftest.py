@@ -1,4 +1,11 @@
-"""Shared fixtures of the fitting tests."""
+"""Shared fixtures of the fitting tests.
+
+Layout: the unit tests of ``hframe_id/fitting/<module>.py`` are in ``test_<module>.py`` here
+(fast: no whole fit, except where a module acts only through one, e.g. held_uncertainty);
+whole fits and whole commands are in ``integration/``, named by what they check, and marked
+``integration`` by their path (``pytest -m "not integration"`` runs the unit tests alone).
+A module fixture that runs a fit stays in one file: each file runs on one xdist worker
+(``--dist loadfile``), so splitting it would run the fit twice."""
 
 import dataclasses
 from pathlib import Path
@@ -59,3 +66,36 @@ def in_motion():
         )
 
     return cut
+
+
+@pytest.fixture(scope="module")
+def small_result(table):
+    """``small_result(**changes)``: a ``FitResult`` made by hand (no fit) on Table 4.2: k_l
+    free and identified (12500 N/m, relative std 1 %), M_cart fixed; ``changes`` replace
+    its fields."""
+    from hframe_id.fitting import FitOptions
+    from hframe_id.fitting.result import FitResult, ParameterEstimate
+
+    def make(**changes):
+        k_l = ParameterEstimate(
+            "k_l", "N/m", 13167.0, 12500.0, 125.0, (12255.0, 12747.0), True, True, 0.01
+        )
+        m_cart = ParameterEstimate(
+            "M_cart", "kg", 1.0412, 1.0412, 0.0, (1.0412, 1.0412), False, False
+        )
+        result = FitResult(
+            success=True,
+            message="converged",
+            parameters=table.replace_values(k_l=12500.0),
+            estimates={"k_l": k_l, "M_cart": m_cart},
+            cost=1234.5,
+            iterations=7,
+            wall_time_s=0.5,
+            correlation=np.eye(1),
+            free_names=("k_l",),
+            initial=table,
+            options=FitOptions(free=("k_l",)),
+        )
+        return dataclasses.replace(result, **changes)
+
+    return make

@@ -5,10 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from servo_outputs import servo_model_file
 
 from hframe_id.errors import FitError
 from hframe_id.fitting import FitOptions
-from hframe_id.fitting.dataset import Dataset
+from hframe_id.fitting.dataset import Dataset, output_kinds, starts_at_rest
 from hframe_id.fitting.problem import build_problem
 from hframe_id.models import build_model
 from hframe_id.recordings.sensors import SensorModel
@@ -18,6 +19,13 @@ from hframe_id.validation.replay import channels
 @pytest.fixture(scope="module")
 def model():
     return build_model("hframe-8")
+
+
+@pytest.fixture(scope="module")
+def servo(tmp_path_factory):
+    """``servo(variant)``: the model name of a DC servo variant (``servo_outputs``)."""
+    folder = tmp_path_factory.mktemp("servo")
+    return lambda variant: servo_model_file(folder, variant)[0]
 
 
 @pytest.fixture(scope="module")
@@ -135,3 +143,17 @@ def test_fitting_and_validation_read_the_same_dataset(model, table, step):
         assert np.array_equal(other.inputs, data.inputs)
         assert np.array_equal(other.noise_std, data.noise_std)
         assert other.at_rest == data.at_rest
+
+
+def test_a_speed_shows_rest_by_its_value(servo):
+    model = build_model(servo("shipped"))
+    assert output_kinds(model) == ("rate", "other")
+    dt, std = 1e-3, np.array([0.5])
+    valid = np.ones((10, 1), dtype=bool)
+    still = np.random.default_rng(6).normal(0.0, 0.5, (10, 1))
+    turning = still + 100.0  # a constant 100 rad/s: no slope, but not at rest
+    assert starts_at_rest(still, valid, std, 10, dt, ("rate",))
+    assert not starts_at_rest(turning, valid, std, 10, dt, ("rate",))
+    assert starts_at_rest(turning, valid, std, 10, dt)  # read as a position, it is still
+    # A current alone cannot tell rest from motion: rest is not assumed.
+    assert not starts_at_rest(still, valid, std, 10, dt, ("other",))

@@ -1,13 +1,10 @@
-"""The multistart portfolio (issue 25, item 3): seeded draws, judged on one scale, the best
-kept and how many reached it reported."""
+"""The multistart portfolio's parts (``fitting.multistart``, issue 25, item 3): seeded draws,
+and how many starts reached the best, judged on one scale."""
 
 import math
 
 import numpy as np
-import pytest
 
-from hframe_id.errors import OptionError
-from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.multistart import (
     SPREAD,
     StartOutcome,
@@ -15,9 +12,6 @@ from hframe_id.fitting.multistart import (
     seeded_starts,
     statement,
 )
-from hframe_id.fitting.summary_json import fit_summary
-
-FREE = ("k_l", "M_cart", "b_cart", "F_c_cart")
 
 
 def test_the_draws_are_seeded_spread_and_clipped(table):
@@ -53,24 +47,3 @@ def test_reached_best_is_a_likelihood_ratio_test():
     line = statement(outcomes)
     assert line.startswith("multistart: 2 of 4 starts reached the best optimum")
     assert "from a" in line and "d: failed" in line
-
-
-def test_starts_must_be_a_positive_whole_number():
-    with pytest.raises(OptionError, match="starts"):
-        FitOptions(starts=0)
-    with pytest.raises(OptionError, match="start_seed"):
-        FitOptions(start_seed=-1)
-
-
-def test_a_portfolio_keeps_the_best_and_reports_every_start(table, x_step):
-    truth = table.replace_values(k_l=12500.0, M_cart=1.15, F_c_cart=0.3)
-    steps = [x_step(truth, seed=3), x_step(truth, seed=4, volts=-4.0)]
-    result = fit_recordings(steps, table, FitOptions(free=FREE, starts=3, start_seed=1))
-    assert result.success, result.message
-    outcomes = result.diagnostics.starts
-    assert [o.label for o in outcomes][0] == "the start" and len(outcomes) == 3
-    # Matched data from a start within x/÷2: every start finds the truth's optimum.
-    assert reached_best(outcomes) == 3
-    assert result.initial is table  # reported from the user's start, whichever won
-    assert "multistart: 3 of 3 starts" in result.summary()
-    assert fit_summary(result, "fit-id", None, None)["starts"]["reached_best"] == 3

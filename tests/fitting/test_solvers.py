@@ -1,75 +1,21 @@
-"""The solver seam (``fitting.solvers``): every solver on every transcription of one
-problem reaches the same optimum, and solvers are registered by name."""
+"""The solver seam (``fitting.solvers``): solvers are registered by name, and built-in names
+and objects that cannot solve are refused. Every solver on every transcription:
+integration/test_cross_method.py."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from examples.scipy_solver import ScipyLeastSquares
 from hframe_id.errors import OptionError
-from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting import FitOptions
 from hframe_id.fitting.solvers import register_solver, solver_names
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.simulated import simulate_recording
-from hframe_id.resources import model_file
-
-TABLE = load_parameter_file(model_file("hframe-8-table4.2.yaml"))
-FREE = ("k_l", "b_bridge")
-
-
-@pytest.fixture(scope="module")
-def recordings():
-    """One simulated 0.4 s record of a step (sim rig, seeded), from a plant 10 % off the
-    table in k_l and with b_bridge 30 N s/m."""
-    u = np.zeros((400, 2))
-    u[50:350] = (-4.0, 4.0)
-    truth = TABLE.replace_values(k_l=TABLE.values["k_l"] * 0.9, b_bridge=30.0)
-    return [simulate_recording(truth, u, seed=5)]
 
 
 @pytest.fixture(scope="module")
 def scipy_solver():
     register_solver("scipy-least-squares", ScipyLeastSquares())
     return "scipy-least-squares"
-
-
-@pytest.fixture(scope="module")
-def reference(recordings):
-    """The default solver's fit on the default transcription."""
-    return fit_recordings(recordings, TABLE, FitOptions(free=FREE))
-
-
-# Transcriptions of the same output-error problem: the default windows, longer windows
-# (both one continuous trajectory per record). Single shooting (the SciPy solver's view)
-# needs continuity; prediction error (continuity "none") is another problem, not compared.
-LABELS = {"ipopt": "IPOPT", "sqpmethod": "SQP", "scipy": "SciPy"}
-TRANSCRIPTIONS = {"10-sample windows": {}, "50-sample windows": {"shooting_interval": 50}}
-
-
-@pytest.mark.parametrize("transcription", TRANSCRIPTIONS)
-@pytest.mark.parametrize("solver", ["gauss-newton", "ipopt", "sqpmethod", "scipy"])
-def test_every_solver_on_every_transcription_reaches_the_same_optimum(
-    recordings, reference, scipy_solver, solver, transcription
-):
-    """Within 1e-4 relative of the default fit: far above every solver's convergence
-    (Gauss-Newton step 1e-6, IPOPT tol 1e-10, SciPy ftol/xtol 1e-12) and far below any
-    physical difference. The windows only shape the path: the optimum is the same."""
-    name = scipy_solver if solver == "scipy" else solver
-    options = FitOptions(free=FREE, solver=name, **TRANSCRIPTIONS[transcription])
-    result = fit_recordings(recordings, TABLE, options)
-    assert reference.success
-    # CasADi's sqpmethod stops at this optimum with "Search Direction Becomes Too Small"
-    # (its tol_du 1e-10 is absolute, below what the gradient of a cost of ~4e3 resolves):
-    # the fit says it did not converge, at the same point as the others.
-    assert result.success or solver == "sqpmethod", result.message
-    # The last stage is the all-window one, by the solver named (its label in the name).
-    assert result.stages[-1].name.startswith("all windows")
-    assert solver == "gauss-newton" or f"({LABELS[solver]})" in result.stages[-1].name
-    for parameter in FREE:
-        assert result.estimates[parameter].estimate == pytest.approx(
-            reference.estimates[parameter].estimate, rel=1e-4
-        ), parameter
 
 
 def test_a_registered_solver_is_an_option_and_an_unknown_one_is_refused(scipy_solver):

@@ -1,11 +1,18 @@
-"""Which recordings carry each parameter's information (``statistics.information_shares``)."""
+"""The fit's statistics (``fitting.statistics``): which recordings carry each parameter's
+information, the uncertainty estimators against white and quantization noise, and data
+without information."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hframe_id.fitting.statistics import Block, information_shares
+from hframe_id.fitting.statistics import (
+    Block,
+    compute_statistics,
+    information_shares,
+    noise_model_errors,
+)
 
 
 def _block(label: str, rows) -> Block:
@@ -45,22 +52,70 @@ def test_a_parameter_no_recording_sees_has_no_share():
     assert shares == {"c": {"A": 0.0, "B": 0.0}}
 
 
-def test_a_fit_of_two_recordings_says_which_carries_each_parameter(tmp_path):
-    """The shipped 2 V x and y steps: every free parameter's shares add up to 1 (within
-    rounding), and the report shows them."""
-    from hframe_id.fitting import FitOptions, fit_recordings
-    from hframe_id.fitting.report_tables import information_lines
-    from hframe_id.parameters import load_parameter_file
-    from hframe_id.recordings.reader import read_recording
-    from hframe_id.resources import dataset_file, model_file
+def _linear_problem(noise: str, seed: int):
+    """y = a + b t observed with white or 'quantized' noise; returns J, r, blocks, truth."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 1, 2000)
+    jac = np.column_stack([np.ones_like(t), t])
+    step = 1.0
+    slow = 3.0 * t  # crosses only 3 quantization levels: long plateaus
+    if noise == "white":
+        err = rng.standard_normal(t.size) / np.sqrt(12)
+    else:
+        u = rng.uniform()
+        err = (np.floor(slow / step + u) - np.floor(u)) * step - slow
+    sigma = step / np.sqrt(12)
+    y = slow + err
+    beta = np.linalg.lstsq(jac / sigma, y / sigma, rcond=None)[0]
+    residual = (jac @ beta - y) / sigma
+    block = Block("x", np.arange(t.size), sigma, step if noise != "white" else 0.0, y)
+    return jac / sigma, residual, [block], beta - np.array([0.0, 3.0])
 
-    recordings = [read_recording(dataset_file(f"2V_{axis}motion.mcap")) for axis in "xy"]
-    table = load_parameter_file(model_file("hframe-8-table4.2.yaml"))
-    result = fit_recordings(recordings, table, FitOptions())
-    shares = result.statistics.information_share
-    assert set(shares) == set(result.statistics.names)
-    for name, share in shares.items():
-        assert set(share) == {"2V_xmotion.mcap", "2V_ymotion.mcap"}, name
-        assert sum(share.values()) == pytest.approx(1.0, abs=1e-12), name
-    lines = information_lines(result)
-    assert lines[0] == "## Where each parameter's information comes from"
+
+def test_textbook_errors_are_right_for_white_noise_and_wrong_for_quantization():
+    z_white, z_quant_gn, z_quant_noise = [], [], []
+    for seed in range(40):
+        jac, r, blocks, err = _linear_problem("white", seed)
+        st = compute_statistics(jac, r, blocks, 0, ("a", "b"), "gauss-newton")
+        z_white.append(err / st.relative_std)
+        jac, r, blocks, err = _linear_problem("quantized", seed)
+        st = compute_statistics(jac, r, blocks, 0, ("a", "b"), "noise-model")
+        z_quant_gn.append(err / st.relative_std_gn)
+        z_quant_noise.append(err / st.relative_std_noise)
+    rms = lambda z: float(np.sqrt(np.mean(np.square(z))))  # noqa: E731
+    # 80 z-scores: rms within ~+/-25 % of 1 when calibrated.
+    assert 0.75 < rms(z_white) < 1.25
+    assert rms(z_quant_gn) > 3  # plateaus make textbook errors far too small
+    assert 0.6 < rms(z_quant_noise) < 1.4
+
+
+def test_noise_model_errors_reproduce_quantization():
+    rng = np.random.default_rng(0)
+    measured = np.linspace(0, 10, 1001)
+    block = Block("enc", np.arange(1001), 1.0 / np.sqrt(12), 1.0, measured)
+    errors = noise_model_errors([block], np.zeros(1001), rng, 50)
+    # Errors of a quantizer in sigma units: within [-sqrt(12), sqrt(12)], std 1, and constant
+    # while the signal stays within one count.
+    assert np.all(np.abs(errors) <= np.sqrt(12) + 1e-9)
+    # Each replicate: a constant offset (the power-up phase, absorbed by the initial state
+    # in a fit) plus an error of std 1 (uniform quantization).
+    assert np.std(errors - errors.mean(axis=0), axis=0) == pytest.approx(1.0, abs=0.05)
+    assert np.std(errors.mean(axis=0)) == pytest.approx(1.0, abs=0.3)
+
+
+def test_statistics_of_data_without_information_do_not_raise():
+    """A plant that never moves (friction above the motors' stall torque) gave overflowing,
+    then NaN sensitivities and a LinAlgError: now every parameter is simply undetermined."""
+    from hframe_id.fitting.statistics import Block, compute_statistics
+
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(200, 3))
+    jac[:, 1] = 0.0  # a parameter the data do not see
+    jac[5, 2] = np.inf
+    jac[7, 2] = np.nan
+    residual = rng.normal(size=200)
+    block = Block("e:phi1", np.arange(200), 1.0, 0.0, np.zeros(200))
+    stats = compute_statistics(jac, residual, [block], 0, ("a", "b", "c"), "robust")
+    assert np.isfinite(stats.relative_std[0])
+    assert not stats.relative_std[1] < 1e6  # undetermined: huge or infinite
+    assert np.isinf(stats.collinearity[1])

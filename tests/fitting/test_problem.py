@@ -1,4 +1,5 @@
-"""Fit problems are checked before any solving: options, names, bounds, data, rigs."""
+"""Fit problems (``fitting.problem``) are checked before any solving: names, bounds, data, rigs;
+parameters in theta and back; which parameters get a prior; which records start at rest."""
 
 import dataclasses
 import math
@@ -8,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hframe_id.errors import FitError, OptionError
-from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.errors import FitError
+from hframe_id.fitting import FitOptions
+from hframe_id.fitting.dataset import starts_at_rest
+from hframe_id.fitting.experiment import default_channel_std
 from hframe_id.fitting.problem import build_problem, default_free
 from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
@@ -30,6 +33,16 @@ def recording(hframe):
     return simulate_recording(hframe, u, seed=1)
 
 
+#: A small free set (stiffness, mass, viscous and Coulomb friction).
+FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
+
+
+@pytest.fixture(scope="module")
+def step(table, x_step):
+    """A 4 V x-motion step from rest (50 samples of pre-roll)."""
+    return x_step(table, seed=7)
+
+
 def test_default_free_set_is_the_issues(hframe):
     free = default_free(build_model("hframe-8"))
     assert set(free) == {
@@ -38,29 +51,6 @@ def test_default_free_set_is_the_issues(hframe):
     }  # fmt: skip
     one_axis = default_free(build_model("one-axis"))
     assert "g_1" not in one_axis and "r" not in one_axis and "K_t" not in one_axis
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "message"),
-    [
-        ({"shooting_interval": 0}, "shooting interval must be >= 1 sample, got 0"),
-        ({"free": "k_l"}, "sequence of parameter names"),
-        ({"free": ()}, "at least one"),
-        ({"bounds": {"k_l": (2.0, 1.0)}}, "low < high"),
-        ({"bound_factor": 1.0}, "bound_factor must be > 1"),
-        ({"smoothing_schedule": (1.0, 10.0)}, "must not increase"),
-        ({"smoothing_schedule": (10.0, 2.0)}, "must end with 1"),
-        ({"uncertainty": "bayes"}, "uncertainty must be one of"),
-        ({"confidence": 95}, "confidence must be in (0, 1)"),
-        ({"channel_std": {"phi1": -1.0}}, "channel_std['phi1'] must be > 0"),
-        ({"max_iterations": 0}, "max_iterations must be > 0"),
-        ({"consider_method": "exact"}, "consider_method must be one of linear, refit"),
-    ],
-)
-def test_options_validate_with_actionable_messages(kwargs, message):
-    with pytest.raises(OptionError, match=None) as err:
-        FitOptions(**kwargs)
-    assert message in str(err.value)
 
 
 def test_unknown_free_parameter_suggests_the_nearest(hframe, recording):
@@ -76,20 +66,6 @@ def test_theta_of_inverts_parameters(hframe, recording):
     theta = np.array([0.3, -0.8, 0.05])
     values = dict(zip(problem.model.parameter_names, problem.parameters(theta), strict=True))
     assert np.allclose(problem.theta_of(hframe.replace_values(**values)), theta, atol=1e-12)
-
-
-def test_at_a_bound_means_within_a_tenth_of_a_standard_error():
-    from hframe_id.fitting.estimates import is_at_bound
-
-    lower, upper = math.log(0.1), math.log(10.0)
-    assert is_at_bound(lower, lower, upper, 1e-6)  # on it
-    # 2e-4 short of it, undetermined (relative std 5): the bound, not the data, fixes it
-    # (the mismatch fits that were reported converged with B_M1 there)
-    assert is_at_bound(lower + 2e-4, lower, upper, 5.0)
-    assert is_at_bound(upper - 0.05, lower, upper, 1.0)
-    # the same distance with a well-determined estimate (std 1e-5) is an interior optimum
-    assert not is_at_bound(lower + 2e-4, lower, upper, 1e-5)
-    assert not is_at_bound(0.0, lower, upper, 5.0)
 
 
 def test_patterns_select_parameters(hframe, recording):
@@ -166,43 +142,6 @@ def test_weights_default_to_the_sensor_noise(hframe, recording):
     assert problem.quantization[:2] == pytest.approx([step, step], rel=1e-12)
 
 
-def test_fit_recordings_raises_before_solving(hframe, recording):
-    with pytest.raises(FitError):
-        fit_recordings([], hframe)
-    with pytest.raises(FitError, match="did you mean"):
-        fit_recordings([recording], hframe, FitOptions(free=("tau_cm1",)))
-
-
-def test_each_component_reads_its_own_options():
-    """The transcription and the problem builder get frozen parts of the flat FitOptions."""
-    from hframe_id.fitting.options import ProblemOptions, TranscriptionOptions
-
-    options = FitOptions(shooting_interval=25, continuity="none", bound_factor=3.0, threads=1)
-    assert options.transcription_options == TranscriptionOptions(25, "none", 1.5, 200, 1)
-    assert isinstance(options.problem_options, ProblemOptions)
-    assert options.problem_options.bound_factor == 3.0
-    assert options.solver_options.max_iterations == options.max_iterations
-    assert options.statistics_options.confidence == 0.95
-
-
-def test_the_library_applies_the_models_fit_defaults():
-    """A fit from Python runs the transcription ``hframe-id fit`` runs (issue 26): settings
-    left to the model take its declared ``fit_defaults``, else the library's."""
-    from hframe_id.fitting.options import DEFAULT_CONTINUITY, DEFAULT_SHOOTING_INTERVAL
-    from hframe_id.models.user import load_model_file
-
-    load_model_file(Path(__file__).resolve().parents[2] / "models" / "emps_axis.py")
-    emps = FitOptions().for_model("emps-axis")
-    assert (emps.shooting_interval, emps.continuity) == (50, "none")
-    given = FitOptions(shooting_interval=20).for_model("emps-axis")
-    assert (given.shooting_interval, given.continuity) == (20, "none")
-    plain = FitOptions().for_model("hframe-8")
-    assert (plain.shooting_interval, plain.continuity) == (
-        DEFAULT_SHOOTING_INTERVAL,
-        DEFAULT_CONTINUITY,
-    )
-
-
 def test_theta_of_a_linear_parameter_starting_at_zero_warns_nothing(hframe, recording):
     """F_c_cart fitted linearly from 0 and at 0 (a reference file with it at 0): theta_of
     computes 0 / 0 for the unused log."""
@@ -212,3 +151,47 @@ def test_theta_of_a_linear_parameter_starting_at_zero_warns_nothing(hframe, reco
         warnings.simplefilter("error")
         theta = problem.theta_of(start)
     np.testing.assert_array_equal(theta, 0.0)
+
+
+def test_rest_is_told_from_motion_by_the_first_window(table, step, in_motion):
+    problem = build_problem([step, in_motion(step, 150)], table, FitOptions(free=FREE))
+    model = problem.model
+    std = _sensor_std(step, model)
+    at_rest, moving = problem.experiments
+    assert starts_at_rest(at_rest.measured, at_rest.valid, std, 10, 1e-3)
+    assert not starts_at_rest(moving.measured, moving.valid, std, 10, 1e-3)
+    assert at_rest.at_rest and not moving.at_rest
+
+
+def test_the_prior_method_frees_the_held_idler_with_its_weight(one_axis):
+    table, rec = one_axis
+    held = build_problem([rec], table, FitOptions())
+    assert not set(IDLER) & set(held.free_names) and not held.prior_names
+    problem = build_problem([rec], table, FitOptions(consider_method="prior"))
+    # Freed in model order, each with weight 1 / 0.2 (the default +/-20 %) around its start.
+    assert problem.free_names == tuple(
+        n for n in problem.model.parameter_names if n in held.free_names or n in IDLER
+    )
+    assert problem.prior_names == IDLER
+    weights = dict(zip(problem.free_names, problem.prior_weight, strict=True))
+    assert [weights[n] for n in IDLER] == pytest.approx([5.0, 5.0, 5.0])
+    # Explicit priors replace the default; a fixed parameter keeps no prior (held exact).
+    chosen = build_problem([rec], table, FitOptions(consider_method="prior", consider={"J_2": 0.1}))
+    assert chosen.prior_names == ("J_2",) and "B_2" not in chosen.free_names
+    fixed = build_problem([rec], table, FitOptions(consider_method="prior", fix=("J_2",)))
+    assert fixed.prior_names == ("B_2", "tau_c2") and "J_2" not in fixed.free_names
+
+
+IDLER = ("J_2", "B_2", "tau_c2")
+
+
+@pytest.fixture(scope="module")
+def one_axis():
+    table = load_parameter_file(MODELS / "one-axis-table2.3.yaml")
+    u = np.zeros((300, 1))
+    u[50:200] = 5.0
+    return table, simulate_recording(table, u, seed=3)
+
+
+def _sensor_std(recording, model):
+    return np.array([default_channel_std(recording, s.name) for s in model.outputs])

@@ -1,12 +1,10 @@
-"""The fit report's correlation section: groups of strongly correlated parameters, said in words,
-and the heat map with its values in the cells."""
+"""The fit report's figures (``fitting.report_figures``): the correlation heat map."""
 
 from types import SimpleNamespace
 
 import numpy as np
 
 from hframe_id.fitting.report_figures import plot_correlation
-from hframe_id.fitting.report_tables import correlated_groups, correlation_lines
 
 
 def _result(correlation, identified_by=None):
@@ -25,25 +23,6 @@ CHAIN = [
     [0.5, -0.93, 1.0, 0.2],
     [0.1, 0.0, 0.2, 1.0],
 ]
-
-
-def test_groups_are_connected_components_strongest_first():
-    groups = correlated_groups(_result(CHAIN))
-    assert [g for g, _ in groups] == [("k_l", "k_r", "J_M1")]
-    assert groups[0][1] == 0.97
-
-
-def test_a_sentence_per_group_with_design_advice_when_the_fitter_gave_any():
-    lines = correlation_lines(_result(CHAIN, {"J_M1": ("6V_ymotion",)}))
-    text = "\n".join(lines)
-    assert "combination of the parameters much better than each one" in text
-    assert "- k_l [unit], k_r [unit], J_M1 [unit] (|r| up to 0.970)" in text
-    assert "experiments that would separate them: 6V_ymotion" in text
-    assert "B_M1" not in text
-
-
-def test_uncorrelated_parameters_are_said_to_be_so():
-    assert correlation_lines(_result(np.eye(4))) == ["No two free parameters have |r| >= 0.9."]
 
 
 def test_heat_map_has_a_number_in_every_cell_below_the_diagonal(tmp_path, monkeypatch):

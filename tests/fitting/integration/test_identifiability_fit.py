@@ -19,7 +19,7 @@ from hframe_id.recordings.simulated import simulate_recording
 #: Two H-frame fits, about 16 s on a quiet machine: run by `make test-all` (and CI).
 pytestmark = pytest.mark.slow
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 CART = ("M_cart", "b_cart", "F_c_cart")
 
 

@@ -29,7 +29,7 @@ from hframe_id.recordings import read_recording
 #: `make test-all` (and CI), not `make test`.
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FILES = ("5V_oneaxis.mcap", "10V_oneaxis.mcap")
 
 

@@ -1,4 +1,5 @@
-"""Initial states: at rest where a record shows rest, estimated where it starts in motion.
+"""Whole fits from records at rest and in motion: the initial state at rest where a record shows
+rest, estimated where it starts in motion.
 
 What the fit reports must be what ``hframe-id validate`` reproduces from the written file,
 and validate simulates from rest at the first measured positions (issue 25, item 1).
@@ -8,8 +9,6 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.dataset import starts_at_rest
-from hframe_id.fitting.experiment import default_channel_std
 from hframe_id.fitting.known_points import simulation_criterion
 from hframe_id.fitting.problem import build_problem
 from hframe_id.models import build_model
@@ -23,20 +22,6 @@ FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
 def step(table, x_step):
     """A 4 V x-motion step from rest (50 samples of pre-roll)."""
     return x_step(table, seed=7)
-
-
-def _sensor_std(recording, model):
-    return np.array([default_channel_std(recording, s.name) for s in model.outputs])
-
-
-def test_rest_is_told_from_motion_by_the_first_window(table, step, in_motion):
-    problem = build_problem([step, in_motion(step, 150)], table, FitOptions(free=FREE))
-    model = problem.model
-    std = _sensor_std(step, model)
-    at_rest, moving = problem.experiments
-    assert starts_at_rest(at_rest.measured, at_rest.valid, std, 10, 1e-3)
-    assert not starts_at_rest(moving.measured, moving.valid, std, 10, 1e-3)
-    assert at_rest.at_rest and not moving.at_rest
 
 
 def test_a_record_at_rest_starts_at_rest(table, step):

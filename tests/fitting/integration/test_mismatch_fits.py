@@ -1,5 +1,5 @@
-"""The fitter on data its model did not generate: l1 merit, estimated noise levels, and the
-consider covariance of held parameters."""
+"""Whole fits on data their model did not generate: estimated noise levels, the consider
+covariance of held parameters (linear and by refits), the box, and the noise rounds."""
 
 import math
 from dataclasses import replace
@@ -8,45 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.consider import consider_covariance
-from hframe_id.fitting.solver import MERIT_RHO, _penalty_parameter
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.protocols import StepProtocol
 from hframe_id.rig.realistic import record_realistic, shipped_plant
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
-
-
-def test_consider_covariance_is_the_spread_of_estimates_under_held_errors():
-    """Linear least squares y = A a + C c: holding c at a wrong value moves the estimate of a
-    by S dc; over many draws of dc with relative std s, cov(a) is S diag(s^2) S^T."""
-    rng = np.random.default_rng(7)
-    a_mat, c_mat = rng.normal(size=(200, 3)), rng.normal(size=(200, 2))
-    c_mat += a_mat[:, :2] * 0.8  # held columns correlated with estimated ones
-    std = np.array([0.2, 0.1])
-    draws = rng.normal(size=(20000, 2)) * std
-    estimates = np.linalg.lstsq(a_mat, -(draws @ c_mat.T).T, rcond=None)[0].T
-    predicted = consider_covariance(a_mat, c_mat, std)
-    # 20000 draws: sampling error of a covariance ~ sqrt(2 / 20000) = 1 % of its scale.
-    assert np.allclose(np.cov(estimates.T), predicted, rtol=0.05, atol=0.03 * predicted.max())
-
-
-def test_penalty_parameter_makes_every_full_step_predict_a_decrease():
-    for change, l1 in ((10.0, 1.0), (1e9, 3.0), (-5.0, 2.0), (0.5, 4.0)):
-        mu = _penalty_parameter(1.0, change, l1)
-        assert mu >= 1.0
-        assert mu * l1 - change >= MERIT_RHO * mu * l1 - 1e-9 * abs(change)
-
-
-@pytest.mark.parametrize(
-    ("field", "value"), [("noise", "guess"), ("consider", {"J_2": -0.2}), ("consider", [1])]
-)
-def test_bad_noise_and_consider_options_are_one_line_errors(field, value):
-    with pytest.raises(OptionError, match=field):
-        FitOptions(**{field: value})
+MODELS = Path(__file__).resolve().parents[3] / "models"
 
 
 @pytest.fixture(scope="module")
@@ -92,24 +60,6 @@ def test_matched_data_keep_the_sensor_noise_levels():
     )
     assert result.success
     assert result.diagnostics.noise.method == "sensor"
-
-
-def test_held_parameters_and_their_prior_are_stated():
-    """A fit with held table values says which, at what value and with what prior."""
-    from hframe_id.fitting.consider import Consider
-    from hframe_id.fitting.result import FitDiagnostics, FitResult
-
-    def held(prior: dict) -> FitResult:
-        result = FitResult.__new__(FitResult)
-        object.__setattr__(result, "diagnostics", FitDiagnostics(consider=Consider(prior)))
-        object.__setattr__(
-            result, "parameters", load_parameter_file(MODELS / "one-axis-table2.3.yaml")
-        )
-        return result
-
-    statement = held({"J_2": 0.2}).held_statement()
-    assert "J_2 = 6.3e-05 (+/-20 %)" in statement and "consider covariance" in statement
-    assert held({}).held_statement() is None
 
 
 def test_refit_consider_agrees_with_the_linear_one_where_the_effect_is_linear():

@@ -7,7 +7,7 @@ import io
 import re
 from pathlib import Path
 
-API_DOC = Path(__file__).resolve().parents[2] / "docs" / "api.md"
+API_DOC = Path(__file__).resolve().parents[3] / "docs" / "api.md"
 
 
 def test_the_first_block_of_the_api_doc_fits_and_prints_the_result():

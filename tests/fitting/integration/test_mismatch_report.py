@@ -1,11 +1,9 @@
-"""The fit report and parameter file on data the model did not generate: the truth through the
-section-4.1 reduction, the model-mismatch statement, and no partial outputs on a crash."""
+"""The fit report and parameter file of a whole fit on data the model did not generate: the
+truth through the section-4.1 reduction, the model-mismatch statement, and no partial outputs
+on a crash."""
 
 import dataclasses
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -17,12 +15,11 @@ from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting import report as report_module
 from hframe_id.fitting.noise_rounds import NoiseSettling
 from hframe_id.fitting.output import noise_levels
-from hframe_id.fitting.report import comparable_truth, mismatch_statement, write_report
+from hframe_id.fitting.report import mismatch_statement, write_report
 from hframe_id.parameters import load_parameter_file
-from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.recordings.simulated import simulate_recording
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 REDUCED_LABEL = "truth (section-4.1 reduction of the plant)"
 
 
@@ -45,21 +42,6 @@ def mismatched(h20_plant):
     result = fit_recordings([rec], table, FitOptions(free=("k_l", "k_r"), verbose=0))
     assert result.success, result.message
     return result, [rec]
-
-
-def test_truth_of_another_variant_is_reduced_or_skipped_with_a_note(h20_plant):
-    recordings = [SimpleNamespace(truth=h20_plant), SimpleNamespace(truth=h20_plant)]
-    truth, label, note = comparable_truth(recordings, "hframe-8")
-    assert truth.variant == "hframe-8" and label == REDUCED_LABEL
-    assert truth.values == reduce_to_hframe8(h20_plant).values
-    assert "section-4.1 reduction" in note
-    truth, label, note = comparable_truth(recordings, "hframe-20")
-    assert truth is h20_plant and label == "truth"
-    truth, label, note = comparable_truth(recordings, "one-axis")
-    assert truth is None and note.startswith("No truth column") and "hframe-20" in note
-    # recordings of different plants: no common truth, nothing to say
-    other = h20_plant.replace_values(k_1=1.1 * h20_plant.values["k_1"])
-    assert comparable_truth([recordings[0], SimpleNamespace(truth=other)], "hframe-8")[0] is None
 
 
 def test_report_of_a_mismatched_fit_states_it_and_compares_with_the_reduced_plant(
@@ -147,23 +129,6 @@ def test_a_crash_while_writing_the_report_keeps_the_fit(
     warning = capsys.readouterr().err
     assert "warning: the report was not written" in warning and "disk on fire" in warning
     assert str(parameter_file) in warning
-
-
-@pytest.mark.parametrize("module", ["hframe_id.fitting.report", "hframe_id.fleet.report"])
-def test_importing_a_report_sets_no_matplotlib_backend(module):
-    """No import-time side effects: the backend of a program that imports a report module is
-    its own (pyplot is never imported; the figures are drawn on Agg canvases when saved)."""
-    code = (
-        # The raw rcParams entry: matplotlib.get_backend() would itself import pyplot.
-        "import sys, matplotlib; raw = lambda: dict.__getitem__(matplotlib.rcParams, 'backend'); "
-        f"before = raw(); import {module}; "
-        "print('matplotlib.pyplot' in sys.modules, raw() == before)"
-    )
-    env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
-    done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
-    )
-    assert done.stdout.split() == ["False", "True"]
 
 
 def test_estimated_noise_that_ends_at_the_sensor_level_states_no_mismatch(mismatched):

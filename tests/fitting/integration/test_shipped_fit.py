@@ -15,7 +15,7 @@ from hframe_id.fitting import fit_recordings
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings import read_recording
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FILES = [f"{v}V_{m}motion.mcap" for v in (2, 4, 6) for m in ("x", "y")]
 
 

@@ -24,7 +24,7 @@ from hframe_id.recordings.simulated import simulate_recording
 #: a 20th-order fit, about 40 s: run by `make test-all` (and CI), not `make test`.
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SUBSET = ("M_cart", "M_bridge", "b_cart", "b_bridge", "g_2")
 
 
