@@ -41,7 +41,9 @@ def main(argv: list[str] | None = None) -> int:
         ms = MultipleShooting(problem)
         ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
         p = problem.parameters(
-            equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+            equation_error_start(
+                problem, ms.measured_positions, ms.measured_usable, threads=ms.threads
+            )
         )
         named = zip(problem.free, problem.free_names, strict=True)
         ends.append({n: float(p[i]) for i, n in named})

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.options import FitOptions, TranscriptionOptions
 from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton
@@ -93,12 +93,14 @@ def predicted_recording(
     )
 
 
-def simulate_experiments(problem: FitProblem) -> list[np.ndarray]:
+def simulate_experiments(
+    problem: FitProblem, transcription: TranscriptionOptions | None = None
+) -> list[np.ndarray]:
     """Per experiment of ``problem``, the (N + 1, n_x) states from rest at the origin at its
     initial parameters, through the rig's DAC (the problem's inputs): the transcription's own
     compiled integrator (``MultipleShooting.fill_nodes`` chains the nodes, ``evaluate`` the
-    samples between them)."""
-    ms = MultipleShooting(problem)
+    samples between them), ``transcription`` (default: the model's)."""
+    ms = MultipleShooting(problem, transcription=transcription)
     theta = np.zeros(len(problem.free))
     known = np.zeros(ms.n_windows, dtype=bool)
     nodes = ms.fill_nodes(np.zeros((ms.n_windows, ms.nx)), known, theta, problem.smoothing)
@@ -257,15 +259,18 @@ def experiment_information(
     # whose levels are estimated from the data does not estimate them from its zeros.
     declared = {**rig, **{NOISE_STD_PREFIX + s.name: 1.0 for s in model.outputs}}
     placeholder = build_problem(recordings([None] * len(tables), declared), params, options)
-    all_states = simulate_experiments(placeholder)
+    transcription = options.for_model(params.variant).transcription_options
+    all_states = simulate_experiments(placeholder, transcription)
     problem = build_problem(recordings(all_states, rig), params, options)
-    return _information(problem, all_states)
+    return _information(problem, all_states, transcription)
 
 
-def _information(problem: FitProblem, all_states: list[np.ndarray]) -> Information:
+def _information(
+    problem: FitProblem, all_states: list[np.ndarray], transcription: TranscriptionOptions
+) -> Information:
     """``Information`` of ``problem`` (at its initial parameters, theta = 0) from the
-    simulated states of its experiments."""
-    ms = MultipleShooting(problem)
+    simulated states of its experiments, transcribed by ``transcription``."""
+    ms = MultipleShooting(problem, transcription=transcription)
     nodes = np.array(
         [all_states[e][k] for e, k in zip(ms.window_experiment, ms.window_start, strict=True)]
     )

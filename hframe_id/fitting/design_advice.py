@@ -32,6 +32,7 @@ def identifying_designs(
     state: SolverState,
     stats: Statistics,
     not_identified: tuple[str, ...],
+    threshold: float,
 ) -> dict[str, tuple[str, ...]]:
     """For each parameter the data do not identify, the standard experiments that would.
 
@@ -39,6 +40,7 @@ def identifying_designs(
     noise-free simulated data, reduced to the parameters (its initial state eliminated), and
     added to the data's; the parameter counts as identified if its textbook relative error,
     scaled by the data's ratio of robust to textbook errors, is below the threshold.
+    Candidates are transcribed like the data (``ms.transcription``).
 
     Parameters
     ----------
@@ -46,6 +48,9 @@ def identifying_designs(
         The fitted problem, its transcription, solver, final iterate and statistics.
     not_identified
         Free parameters held for identifiability (names).
+    threshold
+        The identifiability threshold (``FitOptions.identifiability_threshold``): the
+        largest relative standard error of an identified parameter.
 
     Returns
     -------
@@ -54,7 +59,6 @@ def identifying_designs(
     data, would identify it; else ``("all of A, B, ...",)`` if only all of them together
     would; else ``()``.
     """
-    options = problem.options
     all_free = np.ones(len(problem.free), dtype=bool)
     jac, _, _ = gn.condensed_jacobian(state.evaluation, state.nodes, all_free)
     info_data = reduced_information(jac, ms.n_nuisance)
@@ -72,7 +76,7 @@ def identifying_designs(
         if design.name in present:
             continue
         try:
-            info = _design_information(problem, design, p, state.theta)
+            info = _design_information(problem, ms, design, p, state.theta)
         except FitError:
             continue
         candidates.append((design.name, info))
@@ -81,7 +85,7 @@ def identifying_designs(
     def identified_with(info: np.ndarray, name: str) -> bool:
         cov = np.linalg.pinv(info, hermitian=True)
         std = math.sqrt(max(cov[index[name], index[name]], 0.0)) * ratio
-        return std <= options.identifiability_threshold
+        return std <= threshold
 
     advice = {}
     for name in not_identified:
@@ -97,9 +101,12 @@ def identifying_designs(
     return advice
 
 
-def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.ndarray):
+def _design_information(
+    problem: FitProblem, ms: MultipleShooting, design, p: np.ndarray, theta: np.ndarray
+):
     """Reduced information about the free log-parameters of one candidate experiment, on
-    the data's rig (``hframe_id.design.information``)."""
+    the data's rig (``hframe_id.design.information``), in windows and threads of the
+    data's transcription ``ms``."""
     from hframe_id.design.information import experiment_information
 
     rec0 = problem.experiments[0].recording
@@ -109,9 +116,9 @@ def _design_information(problem: FitProblem, design, p: np.ndarray, theta: np.nd
     options = FitOptions(
         free=problem.free_names,
         channel_std=dict(zip(problem.output_names, problem.channel_std.tolist(), strict=True)),
-        shooting_interval=problem.options.shooting_interval,
+        shooting_interval=ms.transcription.shooting_interval,
         smoothing=problem.smoothing,
-        threads=problem.options.threads,
+        threads=ms.transcription.threads,
     )
     info = experiment_information(
         fitted,

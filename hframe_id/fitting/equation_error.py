@@ -110,6 +110,7 @@ def equation_error_start(
     positions: list[np.ndarray],
     usable: list[np.ndarray],
     rigid: list[np.ndarray] | None = None,
+    threads: int = 1,
 ) -> np.ndarray:
     """Log-parameters theta (free parameters, relative to the problem's start).
 
@@ -127,6 +128,8 @@ def equation_error_start(
         by the encoders): differentiated for velocities and accelerations, because laser
         noise (5 um) differentiated twice at 1 kHz swamps the end effector's acceleration.
         The positions themselves (spring stretches) come from ``positions``.
+    threads : worker threads evaluating the equations (a fit's transcription's,
+        ``TranscriptionOptions.threads``).
     """
     model = problem.model
     nq = model.n_states // 2
@@ -175,7 +178,7 @@ def equation_error_start(
     us = np.hstack([d[2] for d in data])
     mask = np.hstack([d[3] for d in data]).astype(float)  # (nq, n)
     n = xs.shape[1]
-    mapped = fn.map(n, "thread", problem.options.transcription_options.threads)
+    mapped = fn.map(n, "thread", threads)
     # Inputs and outputs bound once to numpy arrays (column-major: an (r, c) matrix is a
     # C-order (c, r) array): converting DMs costs twice the evaluation itself.
     buffer, run = mapped.buffer()

@@ -7,6 +7,7 @@ import time
 from dataclasses import replace
 
 from hframe_id.fitting.noise_rounds import channel_rms
+from hframe_id.fitting.options import FitOptions, StatisticsOptions
 from hframe_id.fitting.result import FitDiagnostics, FitResult, ParameterEstimate, spread
 from hframe_id.parameters import ParameterSet
 
@@ -48,12 +49,14 @@ def ended_at_bound(problem, state, f: int, ci95: tuple[float, float]) -> tuple[f
     return (bound, max(ci95[1], bound)) if lower else (min(ci95[0], bound), bound)
 
 
-def parameter_estimates(problem, state, stats, held) -> tuple[dict, list[str], list[str]]:
+def parameter_estimates(
+    problem, state, stats, held, options: StatisticsOptions
+) -> tuple[dict, list[str], list[str]]:
     """Every parameter's estimate at ``state`` [SI], its standard error and interval from
     ``stats`` (or, for a parameter held for identifiability, from ``held``: name ->
-    (relative std, Gauss-Newton relative std, collinearity) when it was found out); and the
-    free parameters at a bound, and those among them on the default box."""
-    options = problem.options
+    (relative std, Gauss-Newton relative std, collinearity) when it was found out), at the
+    ``options``' confidence and identifiability threshold; and the free parameters at a
+    bound, and those among them on the default box."""
     p = problem.parameters(state.theta)
     names = problem.model.parameter_names
     specs = {s.name: s for s in problem.model.parameters}
@@ -115,22 +118,28 @@ def parameter_estimates(problem, state, stats, held) -> tuple[dict, list[str], l
     return estimates, at_bound, at_box
 
 
-def fit_result(problem, ms, gn, state, stages, stats, held, start, regression=None) -> FitResult:
-    """The ``FitResult`` of a solve that ended at ``state`` after ``stages``; ``held``: the
+def fit_result(
+    problem, options: FitOptions, ms, gn, state, stages, stats, held, start, regression=None
+) -> FitResult:
+    """The ``FitResult`` of a solve of ``problem`` with ``options`` (the fit's, kept as
+    ``FitResult.options``) that ended at ``state`` after ``stages``; ``held``: the
     parameters held for identifiability (``parameter_estimates``), ``start`` the
     ``time.perf_counter()`` the fit began at, ``regression`` the equation-error estimate's
     (theta, seconds) or None."""
-    options = problem.options
     final = stages[-1]
     p = problem.parameters(state.theta)
     names = problem.model.parameter_names
-    estimates, at_bound, at_box = parameter_estimates(problem, state, stats, held)
+    estimates, at_bound, at_box = parameter_estimates(
+        problem, state, stats, held, options.statistics_options
+    )
     not_identified = tuple(n for n in problem.free_names if n in held)
     if not_identified:
         # Imported here: the standard designs read the shipped datasets' protocols (0.15 s).
         from hframe_id.fitting.design_advice import identifying_designs
 
-        advice = identifying_designs(problem, ms, gn, state, stats, not_identified)
+        advice = identifying_designs(
+            problem, ms, gn, state, stats, not_identified, options.identifiability_threshold
+        )
         for name, designs in advice.items():
             estimates[name] = replace(estimates[name], identified_by=designs)
     misfit = ms.residual_rms(state.evaluation.cost)

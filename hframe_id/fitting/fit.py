@@ -209,9 +209,11 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
     problem = result.problem
     regressed = result.equation_error
     if regressed is None:
-        ms = MultipleShooting(problem)
+        ms = MultipleShooting(problem, transcription=options.transcription_options)
         ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
-        regressed = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+        regressed = equation_error_start(
+            problem, ms.measured_positions, ms.measured_usable, threads=ms.threads
+        )
     thetas = candidate_thetas(problem, regressed, options.known_points)
     # The user's bounds and physics (0 of a friction fitted linearly) hold for every point the
     # fit may continue from; the default box, drawn around the start, does not.

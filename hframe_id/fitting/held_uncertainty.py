@@ -20,8 +20,9 @@ from hframe_id.fitting.solver import GaussNewton
 
 def include_held_uncertainty(problem, recordings, state, result):
     """``result`` with the free parameters' intervals widened by the consider covariance of
-    the held ones (``FitOptions.consider``), and a record of what the intervals assume."""
-    options = problem.options
+    the held ones (``FitOptions.consider``), and a record of what the intervals assume.
+    Refits and linearisations use the options ``result`` was fitted with."""
+    options = result.options
     names = problem.model.parameter_names
     prior = consider_priors(problem.model, options.consider)
     if options.consider is None:
@@ -33,7 +34,9 @@ def include_held_uncertainty(problem, recordings, state, result):
         return result.with_diagnostics(consider=Consider(held_relative_std))
     failed: list[str] = []
     if options.consider_method == "refit":
-        variances, failed = _refit_consider_variances(problem, recordings, state, held, prior)
+        variances, failed = _refit_consider_variances(
+            problem, options, recordings, state, held, prior
+        )
         variances = {n: variances[problem.free_names.index(n)] for n in result.free_names}
     else:
         variances = _linear_consider_variances(problem, recordings, state, result, held, prior)
@@ -64,9 +67,9 @@ def _linear_consider_variances(problem, recordings, state, result, held, prior) 
     widened = build_problem(
         recordings,
         problem.initial.replace_values(**values),
-        replace(problem.options, free=result.free_names + tuple(held), fix=(), bounds={}),
+        replace(result.options, free=result.free_names + tuple(held), fix=(), bounds={}),
     )
-    ms = MultipleShooting(widened).uniform()
+    ms = MultipleShooting(widened, transcription=result.options.transcription_options).uniform()
     theta = np.zeros(len(widened.free))
     ev = ms.evaluate(state.nodes, theta, widened.smoothing)
     jac, _, _ = GaussNewton(ms).condensed_jacobian(ev, state.nodes, np.ones(theta.size, bool))
@@ -79,12 +82,13 @@ def _linear_consider_variances(problem, recordings, state, result, held, prior) 
 
 
 def _refit_consider_variances(
-    problem, recordings, state, held, prior
+    problem, options, recordings, state, held, prior
 ) -> tuple[np.ndarray, list[str]]:
     """Per free parameter (``problem.free`` order), the variance (in its theta units) the held
-    parameters' priors add, from refits: the whole fit repeated from its start with each held
-    value at exp(+/-sigma) times itself, and half the difference of the two estimates taken as
-    that prior's one-sigma effect. A held idler 15 % off moved the one-axis fit's B_1 by +52 %
+    parameters' priors add, from refits: the whole fit (``options``, quiet and without
+    consider priors) repeated from its start with each held value at exp(+/-sigma) times
+    itself, and half the difference of the two estimates taken as that prior's one-sigma
+    effect. A held idler 15 % off moved the one-axis fit's B_1 by +52 %
     where the tangent at the optimum predicts 5 %, and warm-started refits (which stay in the
     optimum's basin) covered no better than the tangent (docs/fitting.md). Also returns the
     refits that did not converge ("name xfactor: message"); their ends count all the same,
@@ -94,7 +98,7 @@ def _refit_consider_variances(
 
     names = problem.model.parameter_names
     p = problem.parameters(state.theta)
-    quiet = replace(problem.options, consider={}, verbose=0, progress=None)
+    quiet = replace(options, consider={}, verbose=0, progress=None)
     variances = np.zeros(len(problem.free))
     failed = []
     for name in held:

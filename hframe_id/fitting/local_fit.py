@@ -92,12 +92,13 @@ def _scaled(smoothing: tuple[float, float], factor: float) -> tuple[float, float
     return (smoothing[0] * factor, smoothing[1] * factor)
 
 
-def _stats(gn: GaussNewton, state: SolverState, problem: FitProblem) -> Statistics:
+def _stats(gn: GaussNewton, state: SolverState, problem: FitProblem, method: str) -> Statistics:
+    """The statistics at ``state`` by the ``FitOptions.uncertainty`` ``method``."""
     ev = state.evaluation
     jac, residual, blocks = gn.condensed_jacobian(ev, state.nodes, state.active)
     n_nuisance = gn.ms.n_nuisance
     names = tuple(n for n, a in zip(problem.free_names, state.active, strict=True) if a)
-    return compute_statistics(jac, residual, blocks, n_nuisance, names, problem.options.uncertainty)
+    return compute_statistics(jac, residual, blocks, n_nuisance, names, method)
 
 
 def fit_in_box(
@@ -112,8 +113,9 @@ def fit_in_box(
     issue 25, the rounds took 25 of the 27 s of a fit whose six friction terms ended on the
     box after the first solve and stayed there)."""
     start = time.perf_counter()
+    options = options.for_model(initial.variant)
     problem = build_problem(recordings, initial, options)
-    ms = MultipleShooting(problem)
+    ms = MultipleShooting(problem, transcription=options.transcription_options)
     progress = progress_sink(options)
     nodes, velocity = ms.initial_nodes(problem.p_initial)
     stages: list[StageReport] = []
@@ -122,7 +124,9 @@ def fit_in_box(
     # known points (``FitResult.equation_error``).
     regression = None
     if options.first_stage:
-        theta = equation_error_start(problem, ms.measured_positions, ms.measured_usable)
+        theta = equation_error_start(
+            problem, ms.measured_positions, ms.measured_usable, threads=ms.threads
+        )
         regression = (theta, time.perf_counter() - start)
     # One-axis (a coordinate no output measures): first with the node states estimated at
     # the parameters held (converges from the truth on fresh plants, where the path from the
@@ -133,7 +137,7 @@ def fit_in_box(
     best = None
     for prepass in attempts:
         outcome = _attempt(
-            problem, ms, nodes, velocity, stages, counter, progress, prepass, regression
+            problem, options, ms, nodes, velocity, stages, counter, progress, prepass, regression
         )
         state, gn, stats, held = outcome
         if stages[-1].converged or stages[-1].name == DEFERRED_STAGE:
@@ -144,11 +148,11 @@ def fit_in_box(
     deferred = stages[-1].name == DEFERRED_STAGE
     if unmeasured and not deferred:
         best = _restarts_along_unmeasured_springs(
-            problem, ms, nodes, velocity, stages, counter, progress, best
+            problem, options, ms, nodes, velocity, stages, counter, progress, best
         )
     if may_widen:
         early = fit_result(
-            problem, ms, best[1], best[0], stages, best[2], best[3], start, regression
+            problem, options, ms, best[1], best[0], stages, best[2], best[3], start, regression
         )
         if early.diagnostics.at_default_box:
             return early
@@ -159,12 +163,14 @@ def fit_in_box(
     mismatch = deferred or ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS
     if options.noise == "estimate" or (options.noise == "auto" and mismatch):
         problem, ms, state, gn, rounds, settling = estimate_noise(
-            problem, ms, state, recordings, stages, counter, progress
+            problem, ms, state, recordings, stages, counter, progress, options
         )
-        best = (state, gn, _stats(gn, state, problem), {})
+        # The fit is now of the problem weighted by the estimated levels, and says so.
+        options = replace(options, channel_std=problem.problem_options.channel_std)
+        best = (state, gn, _stats(gn, state, problem, options.uncertainty), {})
     state, gn, stats, held = best
     gn.evaluations = counter["evaluations"]
-    result = fit_result(problem, ms, gn, state, stages, stats, held, start, regression)
+    result = fit_result(problem, options, ms, gn, state, stages, stats, held, start, regression)
     result = result.with_diagnostics(
         noise=noise_report(problem, sensor_std, result.diagnostics.channel_rms, rounds, settling)
     )
@@ -204,7 +210,7 @@ def _misfit_judged(result: FitResult, ms, state, sensor_std: np.ndarray, estimat
 
 
 def _restarts_along_unmeasured_springs(
-    problem, ms, nodes, velocity, stages, counter, progress, best
+    problem, options, ms, nodes, velocity, stages, counter, progress, best
 ):
     """Restarts with each free stiffness of a belt section at an unmeasured pulley moved by
     x/÷ each of ``RESTART_FACTORS``; keeps the lowest converged cost, repeated while it
@@ -238,6 +244,7 @@ def _restarts_along_unmeasured_springs(
                 label = f"restart {tried + 1}, {problem.free_names[index]} x{factor:.3g}"
                 trial_state, trial_gn = _solve(
                     problem,
+                    options,
                     ms,
                     nodes,
                     velocity,
@@ -257,7 +264,7 @@ def _restarts_along_unmeasured_springs(
     if state is best[0]:
         final = stages[-1]
     else:
-        stats = _stats(gn, state, problem)
+        stats = _stats(gn, state, problem, options.uncertainty)
     stages.append(
         replace(
             final,
@@ -285,11 +292,10 @@ def _springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting
     return [f for f, i in enumerate(problem.free) if i in coupled]
 
 
-def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, regression):
+def _attempt(problem, options, ms, nodes, velocity, stages, counter, progress, prepass, regression):
     """Equation-error start (``regression``: its theta and the seconds it took, or None),
     output-error stages and the identifiability holds, from the given start (with the
-    state-estimation pre-pass if ``prepass``)."""
-    options = problem.options
+    state-estimation pre-pass if ``prepass``), with the fit's ``options``."""
     start = time.perf_counter()
     n_free = len(problem.free)
     theta = np.zeros(n_free)
@@ -322,9 +328,20 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, r
         stages.append(equation_error_report(seconds + time.perf_counter() - start, used))
     active = np.ones(n_free, dtype=bool)
     state, gn = _solve(
-        problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass, True
+        problem,
+        options,
+        ms,
+        nodes,
+        velocity,
+        theta,
+        active,
+        stages,
+        counter,
+        progress,
+        prepass,
+        True,
     )
-    stats = _stats(gn, state, problem)
+    stats = _stats(gn, state, problem, options.uncertainty)
     if options.noise != "sensor" and ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS:
         # Model mismatch: identifiability is decided after the noise levels are estimated.
         return state, gn, stats, {}
@@ -334,18 +351,17 @@ def _attempt(problem, ms, nodes, velocity, stages, counter, progress, prepass, r
         # the others (its collinear partners compensate): solve again from the measured
         # nodes, with the other parameters where they were.
         return _solve(
-            problem, ms, nodes, velocity, theta, active, stages, counter, progress, prepass
+            problem, options, ms, nodes, velocity, theta, active, stages, counter, progress, prepass
         )
 
-    return _hold_unidentified(problem, ms, state, gn, stats, stages, resolve)
+    return _hold_unidentified(problem, options, ms, state, gn, stats, stages, resolve)
 
 
-def _hold_unidentified(problem, ms, state, gn, stats, stages, resolve):
+def _hold_unidentified(problem, options, ms, state, gn, stats, stages, resolve):
     """Holds free parameters whose relative standard error exceeds the identifiability
     threshold at their initial value, the worst first, and solves again with
     ``resolve(theta, active) -> (state, solver)``, until every parameter left is identified.
     Returns (state, solver, statistics, held)."""
-    options = problem.options
     n_free = len(problem.free)
     held: dict[str, tuple[float, float, float]] = {}
     for _ in range(n_free):
@@ -378,12 +394,13 @@ def _hold_unidentified(problem, ms, state, gn, stats, stages, resolve):
         if not active.any():
             break
         state, gn = resolve(theta, active)
-        stats = _stats(gn, state, problem)
+        stats = _stats(gn, state, problem, options.uncertainty)
     return state, gn, stats, held
 
 
 def _moving_window_stages(
     problem,
+    options,
     ms,
     moving,
     nodes,
@@ -400,7 +417,6 @@ def _moving_window_stages(
     fallback), then every node filled by simulating from them. Returns (nodes, theta,
     mismatch, moving_rms): whether the fit defers to the noise rounds (see ``_solve``), and
     the moving windows' residual rms [noise std]."""
-    options = problem.options
     smoothing = problem.smoothing
     schedule = options.smoothing_schedule
     nodes = nodes.copy()
@@ -470,6 +486,7 @@ def _moving_window_stages(
 
 def _solve(
     problem,
+    options,
     ms,
     nodes,
     velocity,
@@ -489,7 +506,6 @@ def _solve(
     all-window stages, leaving them to the noise rounds (the last stage is then
     ``DEFERRED_STAGE``, not converged). Restarts and holds never defer: their outcome is
     judged by a converged all-window stage."""
-    options = problem.options
     smoothing = problem.smoothing
     theta = theta.copy()
     if prepass:
@@ -503,6 +519,7 @@ def _solve(
     if 0 < moving.size < ms.n_windows:
         nodes, theta, mismatch, moving_rms = _moving_window_stages(
             problem,
+            options,
             ms,
             moving,
             nodes,
@@ -556,7 +573,7 @@ def _solve(
         state = SolverState(start_nodes.copy(), theta.copy(), active.copy(), velocity_hint=velocity)
         if use_penalty:
             stages.append(penalty_stage(gn, state, smoothing, options, "all windows"))
-        stages.append(exact_stage(gn, state, "all windows", radius=0.5))
+        stages.append(exact_stage(gn, state, "all windows", options.solver_options, radius=0.5))
         if stages[-1].converged:
             break
     counter["evaluations"] += gn.evaluations

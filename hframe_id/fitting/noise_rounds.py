@@ -107,12 +107,12 @@ def channel_rms(ms: MultipleShooting, ev: Evaluation) -> dict[str, float]:
 
 
 def estimate_noise(
-    problem: FitProblem, ms, state: SolverState, recordings, stages, counter, progress
+    problem: FitProblem, ms, state: SolverState, recordings, stages, counter, progress, options
 ):
     """Channel noise levels by maximum likelihood, (1), with the fit, warm-started from
     ``state`` (every free parameter released; parameters held for identifiability are not
     held again: holding one at its initial value moves the others away from the best
-    approximation).
+    approximation); ``options``: the fit's ``FitOptions``.
 
     A last round that stalls is rejected, as a trust region rejects a step: the fit is the
     last converged round's optimum (a real trajectory at its weights), marked by a
@@ -134,10 +134,10 @@ def estimate_noise(
         if rounds > 1 and change <= NOISE_RTOL and stages[-1].converged:
             rounds -= 1
             break
-        problem, ms = _weighted(recordings, problem, std)
+        problem, ms = _weighted(recordings, problem, std, options)
         named = zip(problem.output_names, std, strict=True)
         label = f"noise round {rounds} (std {', '.join(f'{k} {v:.3g}' for k, v in named)})"
-        state, gn = warm_solve(ms, state, stages, counter, progress, label)
+        state, gn = warm_solve(ms, state, stages, counter, progress, label, options)
         if stages[-1].converged:
             accepted = (problem, ms, state, gn, rounds)
     else:
@@ -153,13 +153,12 @@ def _change(std: np.ndarray, weight_std: np.ndarray) -> float:
     return float(np.max(np.abs(np.log(std / weight_std))))
 
 
-def _weighted(recordings, problem: FitProblem, std: np.ndarray):
-    """The problem and its transcription with the channels weighed by ``std`` [SI]."""
+def _weighted(recordings, problem: FitProblem, std: np.ndarray, options):
+    """The problem and its transcription (``options``: the fit's ``FitOptions``) with the
+    channels weighed by ``std`` [SI]."""
     weights = dict(zip(problem.output_names, np.asarray(std).tolist(), strict=True))
-    problem = build_problem(
-        recordings, problem.initial, replace(problem.options, channel_std=weights)
-    )
-    return problem, MultipleShooting(problem)
+    problem = build_problem(recordings, problem.initial, replace(options, channel_std=weights))
+    return problem, MultipleShooting(problem, transcription=options.transcription_options)
 
 
 def noise_levels(ms, state: SolverState, sensor_std: np.ndarray) -> np.ndarray:
@@ -186,11 +185,12 @@ def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageR
     )
 
 
-def warm_solve(ms, start: SolverState, stages, counter, progress, label):
+def warm_solve(ms, start: SolverState, stages, counter, progress, label, options):
     """Every window, exact continuity, from ``start``'s nodes and parameters, monotone (no
     step may raise the merit: a warm start is kept, not thrown away by free steps). With
     estimated levels a stall counts as converged only with its defects at ``defect_tol``
-    (or closed by simulation), see ``GaussNewton.run``. Returns (state, solver)."""
+    (or closed by simulation), see ``GaussNewton.run``; ``options``: the fit's
+    ``FitOptions``. Returns (state, solver)."""
     ms = ms.uniform()
     gn = GaussNewton(ms, progress, freeze_sloppy=True)
     state = SolverState(start.nodes.copy(), start.theta.copy(), start.active.copy())
@@ -199,10 +199,11 @@ def warm_solve(ms, start: SolverState, stages, counter, progress, label):
             gn,
             state,
             label,
+            options.solver_options,
             cost_rtol=WARM_COST_RTOL,
             radius=0.5,
             watchdog=False,
-            stall_defect_tol=ms.problem.options.defect_tol,
+            stall_defect_tol=options.defect_tol,
         )
     )
     counter["evaluations"] += gn.evaluations

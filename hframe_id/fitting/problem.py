@@ -36,7 +36,10 @@ MIN_VALID_PER_UNKNOWN = 5
 
 @dataclass(frozen=True)
 class FitProblem:
-    """Everything a transcription needs, validated."""
+    """What is estimated, from what: model, free parameters and their spaces and bounds,
+    the experiments and their weights (the cost), validated. No transcription, solver or
+    strategy settings: those are the ``MultipleShooting``'s (``TranscriptionOptions``), the
+    solver's (``SolverOptions``) and the fit's (``FitOptions``)."""
 
     model: Model
     initial: ParameterSet
@@ -56,7 +59,9 @@ class FitProblem:
     quantization: np.ndarray  # (n_y,) encoder step [rad] of quantized channels, else 0
     sample_period_s: float
     smoothing: tuple[float, float]
-    options: FitOptions
+    #: what is estimated, from what (``FitOptions.problem_options``): free set, bounds,
+    #: channel noise, latency, priors; no transcription, solver or strategy settings
+    problem_options: ProblemOptions
     #: (n_f,) weight 1 / sigma of each free parameter's Gaussian prior on theta, centred on
     #: the start value (theta = 0): the residual w theta (0: no prior;
     #: ``FitOptions.consider_method`` "prior")
@@ -118,7 +123,7 @@ class FitProblem:
     def zero_floor(self) -> np.ndarray:
         """(n_f,) True for nonnegative free parameters whose lower bound is the physical 0
         (not a bound the user gave): an estimate there is zero, not stopped by a box."""
-        given = self.options.problem_options.bounds
+        given = self.problem_options.bounds
         return np.array(
             [
                 self.model.parameters[i].kind == "nonnegative"
@@ -211,7 +216,9 @@ def _with_initial_state(dataset: Dataset, sensor_std: np.ndarray, options) -> Da
 def build_problem(
     recordings: Sequence[Recording], initial: ParameterSet, options: FitOptions
 ) -> FitProblem:
-    """Check the data and options against the model and assemble the problem.
+    """Check the data and options against the model and assemble the problem, which keeps
+    the options' ``problem_options`` (the shooting interval is checked against the records
+    here, before any solving, but belongs to the transcription).
 
     Raises ``FitError`` (before any solving) for: no recordings, mixed variants or rigs,
     unknown free parameter names (suggesting the nearest), a free parameter at zero (log
@@ -221,7 +228,7 @@ def build_problem(
     recordings = _checked_inputs(recordings, initial)
     model = build_model(initial.variant)
     options = options.for_model(initial.variant)
-    wanted = options.problem_options  # what this builder reads; ``options`` is kept whole
+    wanted = options.problem_options  # what the problem keeps
     _check_channels(model, initial, recordings[0])
     p0 = model.parameter_vector(initial.values)
     names = list(model.parameter_names)
@@ -258,7 +265,7 @@ def build_problem(
         quantization=quantization,
         sample_period_s=float(recordings[0].sample_period_s),
         smoothing=(float(smoothing[0]), float(smoothing[1])),
-        options=options,
+        problem_options=wanted,
         prior_weight=np.array([1.0 / priors[n] if n in priors else 0.0 for n in free_names]),
     )
 

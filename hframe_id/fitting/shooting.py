@@ -36,7 +36,7 @@ from hframe_id.fitting.kernel import (
     compiled_windows,
     window_function,
 )
-from hframe_id.fitting.options import TranscriptionOptions
+from hframe_id.fitting.options import FitOptions, TranscriptionOptions
 from hframe_id.fitting.problem import FitProblem, output_matrix
 from hframe_id.fitting.shooting_nodes import ShootingNodes
 from hframe_id.simulation.integrators import (
@@ -73,6 +73,12 @@ class Evaluation:
         return 0.5 * (float(np.sum(self.residual**2)) + prior)
 
 
+def default_transcription(problem: FitProblem) -> TranscriptionOptions:
+    """The transcription ``FitOptions()`` gives ``problem``'s model: its declared
+    ``fit_defaults`` (shooting interval, continuity), else the library's."""
+    return FitOptions().for_model(problem.initial.variant).transcription_options
+
+
 class MultipleShooting(ShootingNodes):
     """The windows, data layout and evaluation of one problem (its nodes' starting values:
     ``ShootingNodes``)."""
@@ -83,10 +89,12 @@ class MultipleShooting(ShootingNodes):
         interval: int | None = None,
         transcription: TranscriptionOptions | None = None,
     ):
-        """``transcription``: windows, continuity, substeps, threads (default: the problem's
-        ``FitOptions.transcription_options``); ``interval`` overrides its window length."""
+        """``transcription``: windows, continuity, substeps, threads (a fit passes its
+        ``FitOptions.transcription_options``; default: the model's, those of ``FitOptions()``
+        for its variant, ``FitOptions.for_model``); ``interval`` overrides its window
+        length."""
         self.problem = problem
-        self.transcription = transcription or problem.options.transcription_options
+        self.transcription = transcription or default_transcription(problem)
         self.model = problem.model
         self.m = int(interval or self.transcription.shooting_interval)
         self.dt = problem.sample_period_s

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from hframe_id.errors import OptionError
 
 if TYPE_CHECKING:
+    from hframe_id.fitting.options import SolverOptions
     from hframe_id.fitting.single_shooting import SingleShooting
     from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 
@@ -60,13 +61,15 @@ class Stage:
 
     ``gauss_newton``: the transcription (``.ms``, every window with the stiffest window's
     substeps) and its linearisation (``condensed_jacobian``); ``state``: the start, where
-    the solver leaves its end; ``settings``: the Gauss-Newton solver's own stage settings
-    (trust-region radius, cost tolerance, watchdog, re-weighting), which other solvers
-    ignore."""
+    the solver leaves its end; ``options``: the solver's (``FitOptions.solver_options``:
+    ``max_iterations``, ``step_tol``, ``defect_tol``); ``settings``: the Gauss-Newton
+    solver's own stage settings (trust-region radius, cost tolerance, watchdog,
+    re-weighting), which other solvers ignore."""
 
     label: str
     gauss_newton: GaussNewton
     state: SolverState
+    options: SolverOptions
     settings: dict[str, Any] = field(default_factory=dict)
     started: float = field(default_factory=time.perf_counter)
 
@@ -74,11 +77,6 @@ class Stage:
     def transcription(self):
         """The ``MultipleShooting`` transcription the stage solves."""
         return self.gauss_newton.ms
-
-    @property
-    def options(self):
-        """The fit's ``FitOptions`` (``max_iterations``, ``step_tol``, ``defect_tol``)."""
-        return self.transcription.problem.options
 
     @property
     def smoothing(self) -> tuple[float, float]:

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.options import FitOptions, SolverOptions
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.solvers import Stage, solver_named
 
@@ -37,12 +37,14 @@ PREPASS_ITERATIONS = 30
 PREPASS_COST_RTOL = 1e-4
 
 
-def exact_stage(gn: GaussNewton, state: SolverState, label: str, **settings) -> StageReport:
-    """Every window with exact continuity, to the options' tolerances, by the solver the
-    options name (``fitting.solvers``), from ``state``, which it updates; ``settings`` are the
+def exact_stage(
+    gn: GaussNewton, state: SolverState, label: str, options: SolverOptions, **settings
+) -> StageReport:
+    """Every window with exact continuity, to the ``options``' tolerances, by the solver they
+    name (``fitting.solvers``), from ``state``, which it updates; ``settings`` are the
     Gauss-Newton solver's own (``GaussNewton.run``)."""
-    solver = solver_named(gn.ms.problem.options.solver)
-    return solver.solve(Stage(label, gn, state, settings))
+    solver = solver_named(options.solver)
+    return solver.solve(Stage(label, gn, state, options, settings))
 
 
 def penalty_stage(

@@ -78,10 +78,9 @@ def test_sensitivities_match_finite_differences(setup):
 
 def test_the_residual_jacobians_of_a_general_output_map_are_exact(servo):
     name = servo("shipped")
-    problem = build_problem(
-        [servo_recording(name, 3, n=300)], start(name), FitOptions(verbose=0, shooting_interval=20)
-    )
-    ms = MultipleShooting(problem)
+    options = FitOptions(verbose=0, shooting_interval=20).for_model(start(name).variant)
+    problem = build_problem([servo_recording(name, 3, n=300)], start(name), options)
+    ms = MultipleShooting(problem, transcription=options.transcription_options)
     assert ms._output_index is None  # the current is no state: the general output map
     nodes, _ = ms.initial_nodes(problem.p_initial)
     theta = np.array([0.1, -0.2, 0.05, 0.03])  # J, B, tau_c, g moved off the start

@@ -38,7 +38,8 @@ def test_filling_a_view_without_some_records_windows():
 def transcription(table, x_step):
     """The 10-sample windows of one 4 V x-motion step from rest, k_l free."""
     options = FitOptions(free=("k_l",)).for_model("hframe-8")
-    return MultipleShooting(build_problem([x_step(table, seed=5)], table, options))
+    problem = build_problem([x_step(table, seed=5)], table, options)
+    return MultipleShooting(problem, transcription=options.transcription_options)
 
 
 def test_measured_nodes_take_each_valid_measured_position_and_rest_at_the_start(transcription):

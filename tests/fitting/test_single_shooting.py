@@ -17,7 +17,8 @@ FREE = ("k_l", "b_bridge")
 
 def _single_shooting(table, recording, **options):
     options = FitOptions(free=FREE, **options).for_model("hframe-8")
-    ms = MultipleShooting(build_problem([recording], table, options))
+    problem = build_problem([recording], table, options)
+    ms = MultipleShooting(problem, transcription=options.transcription_options)
     nodes, _ = ms.initial_nodes(ms.problem.p_initial)
     state = SolverState(nodes, np.zeros(len(FREE)), np.ones(len(FREE), dtype=bool))
     return SingleShooting(ms, state)

@@ -52,7 +52,8 @@ def _both_solvers(recordings, start, options):
     """(transcription, start, the Gauss-Newton fit, IPOPT's outcome from the measured nodes)."""
     gauss_newton = fit_recordings(recordings, start, options)
     problem = build_problem(recordings, start, options)
-    ms = MultipleShooting(problem)
+    transcription = options.for_model(start.variant).transcription_options
+    ms = MultipleShooting(problem, transcription=transcription)
     nodes, _ = ms.initial_nodes(problem.p_initial)
     n_free = len(problem.free)
     outcome = solve_nlp(ms, nodes, np.zeros(n_free), np.ones(n_free, bool), problem.smoothing)

@@ -174,8 +174,8 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
     real_warm_solve = noise_rounds.warm_solve
     rounds = []
 
-    def warm_solve(ms, start, stages, counter, progress, label):
-        state, gn = real_warm_solve(ms, start, stages, counter, progress, label)
+    def warm_solve(ms, start, stages, counter, progress, label, options):
+        state, gn = real_warm_solve(ms, start, stages, counter, progress, label, options)
         names = ms.problem.model.parameter_names
         rounds.append(dict(zip(names, ms.problem.parameters(state.theta), strict=True)))
         if len(rounds) == stalled_round:
