@@ -33,9 +33,7 @@ from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import fit_result
 from hframe_id.fitting.held_uncertainty import include_held_uncertainty
 from hframe_id.fitting.noise_rounds import MISMATCH_RMS, estimate_noise, noise_report
-from hframe_id.fitting.options import (
-    FitOptions,
-)
+from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.result import FitResult
