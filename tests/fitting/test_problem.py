@@ -195,3 +195,20 @@ def one_axis():
 
 def _sensor_std(recording, model):
     return np.array([default_channel_std(recording, s.name) for s in model.outputs])
+
+
+def test_the_problem_keeps_its_own_options_and_the_transcription_gets_its_own(hframe, recording):
+    """Each link owns its options: the problem the ``problem_options`` (no solver or strategy
+    settings), the transcription the ``transcription_options`` it is given (by default the
+    model's, as ``FitOptions()`` resolves them)."""
+    from hframe_id.fitting.shooting import MultipleShooting
+
+    options = FitOptions(bound_factor=3.0, shooting_interval=25, max_iterations=7)
+    problem = build_problem([recording], hframe, options)
+    resolved = options.for_model(hframe.variant)
+    assert problem.problem_options == resolved.problem_options
+    assert not hasattr(problem, "options")
+    given = MultipleShooting(problem, transcription=resolved.transcription_options)
+    assert given.transcription == resolved.transcription_options and given.m == 25
+    default = FitOptions().for_model(hframe.variant).transcription_options
+    assert MultipleShooting(problem).transcription == default
