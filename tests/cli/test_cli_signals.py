@@ -40,6 +40,10 @@ STARTS_WITHIN_S = 120
 LONG_CONTROL = ["control", "--params", H8, "--kp", "20", "--side", "0.1", "--v-max", "0.002"]
 
 
+def _hangup_at_default() -> None:
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
+
 def _interrupt(argv: list, cwd: Path, ready: str, signum: int, stream: str = "stderr"):
     """Run ``hframe-id argv`` in ``cwd`` (its own process group), send ``signum`` to the
     process once a line starting with ``ready`` appears on ``stream``; (exit status, stderr
@@ -51,6 +55,9 @@ def _interrupt(argv: list, cwd: Path, ready: str, signum: int, stream: str = "st
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        # As a terminal's command starts: SIGHUP at its default, also when the suite itself
+        # runs under nohup (which ignores it, and the command keeps an ignored SIGHUP ignored).
+        preexec_fn=_hangup_at_default,
     )
     seen: dict[str, list[str]] = {"stdout": [], "stderr": []}
     started = threading.Event()
