@@ -65,51 +65,52 @@ def runner() -> Iterator[Callable[..., subprocess.CompletedProcess]]:
 
     home = Path(tempfile.mkdtemp(prefix="hframe-id-home-"))
     os.chown(home, UNPRIVILEGED_UID, -1)
-    tried = []
-    for python, path in _pythons():
-        env = {
-            "PATH": "/usr/bin:/bin",
-            "HOME": str(home),
-            "MPLCONFIGDIR": str(home / "mpl"),
-            "HFRAME_ID_CACHE": str(home / "cache"),
-            "MPLBACKEND": "Agg",
-            "PYTHONPATH": path,
-        }
-        try:
-            probe = subprocess.run(
-                [python, "-c", "import hframe_id.cli, numpy, yaml"],
-                cwd=home,
-                env=env,
-                user=UNPRIVILEGED_UID,
-                capture_output=True,
-                text=True,
-            )
-        except OSError as err:  # the interpreter itself out of reach
-            tried.append(f"{python}: {err.strerror}")
-            continue
-        if probe.returncode == 0:
-
-            def run_unprivileged(argv, cwd, python=python, env=env):
-                command = [python, "-m", "hframe_id", *argv]
-                return subprocess.run(
-                    command,
-                    cwd=cwd,
+    try:
+        tried = []
+        for python, path in _pythons():
+            env = {
+                "PATH": "/usr/bin:/bin",
+                "HOME": str(home),
+                "MPLCONFIGDIR": str(home / "mpl"),
+                "HFRAME_ID_CACHE": str(home / "cache"),
+                "MPLBACKEND": "Agg",
+                "PYTHONPATH": path,
+            }
+            try:
+                probe = subprocess.run(
+                    [python, "-c", "import hframe_id.cli, numpy, yaml"],
+                    cwd=home,
                     env=env,
                     user=UNPRIVILEGED_UID,
                     capture_output=True,
                     text=True,
                 )
+            except OSError as err:  # the interpreter itself out of reach
+                tried.append(f"{python}: {err.strerror}")
+                continue
+            if probe.returncode == 0:
 
-            yield run_unprivileged
-            shutil.rmtree(home, ignore_errors=True)
-            return
-        tried.append(f"{python}: {probe.stderr.strip().splitlines()[-1:]}")
-    shutil.rmtree(home, ignore_errors=True)
-    pytest.fail(
-        f"running as root, and uid {UNPRIVILEGED_UID} can run no Python with hframe_id "
-        f"(tried {'; '.join(tried)}): make the repository and an interpreter with its "
-        "packages readable by that user, or run the tests as a normal user"
-    )
+                def run_unprivileged(argv, cwd, python=python, env=env):
+                    command = [python, "-m", "hframe_id", *argv]
+                    return subprocess.run(
+                        command,
+                        cwd=cwd,
+                        env=env,
+                        user=UNPRIVILEGED_UID,
+                        capture_output=True,
+                        text=True,
+                    )
+
+                yield run_unprivileged
+                return
+            tried.append(f"{python}: {probe.stderr.strip().splitlines()[-1:]}")
+        pytest.fail(
+            f"running as root, and uid {UNPRIVILEGED_UID} can run no Python with hframe_id "
+            f"(tried {'; '.join(tried)}): make the repository and an interpreter with its "
+            "packages readable by that user, or run the tests as a normal user"
+        )
+    finally:
+        shutil.rmtree(home, ignore_errors=True)
 
 
 @pytest.fixture
