@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 
 from hframe_id.cli.fit_options import fit_options
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import check_dir
-from hframe_id.errors import FitError
+from hframe_id.cli.outputs import check_dir, check_input
+from hframe_id.errors import FitError, OptionError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.options import (
     CONSIDER_METHODS,
@@ -364,15 +364,17 @@ def _add_output_options(parser: argparse.ArgumentParser) -> None:
 def resolve_dataset(name: str) -> Path:
     """The recording ``name``: as given, else in ./datasets/, then in the shipped datasets/.
 
-    Raises FitError naming the folders looked in.
+    Raises FitError naming the folders looked in, OptionError for a recording that cannot
+    be read (mode 000, or in a folder that cannot be searched).
     """
     path = Path(name)
-    if path.exists():
-        return path
-    for directory in DATASETS_DIRS:
-        candidate = directory / name
-        if candidate.exists():
-            return candidate
+    for candidate in (path, *(directory / name for directory in DATASETS_DIRS)):
+        try:
+            found = candidate.exists()
+        except PermissionError as err:
+            raise OptionError(f"{candidate}: cannot read ({err.strerror})") from None
+        if found:
+            return check_input(candidate)
     looked = ", ".join(f"{d}/" for d in DATASETS_DIRS)
     raise FitError(f"{name}: no such recording (also looked in {looked})")
 

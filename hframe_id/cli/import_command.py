@@ -6,7 +6,7 @@ import argparse
 import datetime as dt
 import sys
 
-from hframe_id.cli.outputs import add_force_option, check_file
+from hframe_id.cli.outputs import add_force_option, check_file, check_input
 from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 from hframe_id.recordings.import_spec import ROLES, ColumnMap, ImportSpec
@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id import``: convert the file with the ``--map`` columns into ``--out``."""
     from hframe_id.recordings.importer import import_recording
 
+    check_input(args.file)
     try:
         spec = ImportSpec(
             columns=tuple(ColumnMap.parse(text) for text in args.map),

@@ -5,9 +5,11 @@ A command that cannot write its result says so at once, as one line with exit st
 instead of failing after seconds or minutes of computing, and writes nothing. The guard
 checks, for each output: that it is of the right kind (a file where a file goes, a folder
 where a folder goes), that it does not exist unless ``--force`` is given, that its folder
-exists (or can be made) and that new files can be created there. Writability is probed by
-creating (and at once removing) a temporary file where the output would go: the permission
-bits say little when running as root or on special file systems such as /proc.
+exists (or can be made), can be reached (every folder on the way searchable) and that new files
+can be created there, and that an existing file given with ``--force`` is not read-only.
+Writability is probed by creating (and at once removing) a temporary file where the output
+would go: the permission bits say little when running as root or on special file systems
+such as /proc.
 
 The outputs are then written through ``written_together``: each under a hidden temporary name
 beside its target, all put in place when the command's work is done, none on any failure.
@@ -50,6 +52,22 @@ def _probe(directory: Path, option: str, target: Path) -> None:
         ) from None
 
 
+def _reachable(path: Path, option: str, target: Path) -> None:
+    """Raise unless every existing folder on the way to ``path`` can be searched: ``stat``
+    of a name in a folder without execute permission (or an unreadable one, mode 000) fails
+    with EACCES, which ``Path.exists`` passes on as a PermissionError."""
+    for step in reversed((path, *path.parents)):
+        try:
+            os.lstat(step)
+        except PermissionError as err:
+            raise OptionError(
+                f"{option} {target}: cannot reach it, folder {step.parent} cannot be "
+                f"searched ({err.strerror})"
+            ) from None
+        except OSError:
+            return  # missing, or under a file: the kind checks say which
+
+
 def _nearest_folder(path: Path, option: str, target: Path) -> Path:
     """The nearest existing ancestor of ``path``, which must be a folder."""
     folder = path
@@ -64,7 +82,10 @@ def _check_target(path: Path, option: str, force: bool, folder: bool) -> None:
     """``path`` is of the kind it will be written as, and new unless ``force``. An output
     is put in place by a rename, which would replace a device, a pipe or a socket (as root,
     ``--out /dev/null --force`` would delete the system's /dev/null): those are refused even
-    with ``--force``."""
+    with ``--force``. So is a read-only file: the rename would replace it (its folder being
+    writable), which its owner made it read-only to prevent. Root may write any file, and
+    ``os.access`` says so."""
+    _reachable(path, option, path)
     if folder and path.exists() and not path.is_dir():
         raise OptionError(f"{option} {path}: exists and is not a directory")
     if not folder and path.is_dir():
@@ -75,6 +96,10 @@ def _check_target(path: Path, option: str, force: bool, folder: bool) -> None:
         )
     if (path.exists() or path.is_symlink()) and not force:
         raise OptionError(f"{option} {path}: exists already; pass --force to replace it")
+    if not folder and path.is_file() and not os.access(path, os.W_OK):
+        raise OptionError(
+            f"{option} {path}: exists and is read-only; make it writable or remove it first"
+        )
 
 
 def _file_name(text: str, option: str) -> Path:
@@ -124,8 +149,13 @@ def check_dir(
     or be empty. Creates nothing."""
     path = Path(path)
     _check_target(path, option, force=True, folder=True)
-    if empty and path.is_dir() and any(path.iterdir()):
-        raise OptionError(f"{option} {path}: exists and is not empty")
+    if empty and path.is_dir():
+        try:
+            filled = any(path.iterdir())
+        except OSError as err:
+            raise OptionError(f"{option} {path}: cannot list it ({err.strerror})") from None
+        if filled:
+            raise OptionError(f"{option} {path}: exists and is not empty")
     for name in files:
         _check_target(path / name, option, force, folder=False)
     for name in folders:
@@ -160,6 +190,22 @@ def written_together() -> Iterator[Staging]:
 #: Samples one simulated or recorded run may have: 10 million is 2.8 h at 1 kHz and keeps the
 #: signal tables near a gigabyte; longer runs fail at once instead of with a MemoryError.
 MAX_SAMPLES = 10_000_000
+
+
+def check_input(path: str | os.PathLike) -> Path:
+    """``path`` as given, refused at once if the file cannot be opened for reading (mode
+    000, or in a folder that cannot be searched): the readers would otherwise report the
+    permission error without saying what failed. A missing file or a folder is left to the
+    reader, whose message says what it expected there."""
+    path = Path(path)
+    try:
+        with open(path, "rb"):
+            pass
+    except PermissionError as err:
+        raise OptionError(f"{path}: cannot read ({err.strerror})") from None
+    except OSError:
+        pass
+    return path
 
 
 def check_length(duration_s: float, period_s: float, option: str) -> None:
