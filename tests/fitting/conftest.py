@@ -13,8 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hframe_id.fitting import FitOptions
+from hframe_id.fitting.problem import build_problem
+from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
+from hframe_id.simulation.open_loop import simulate
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
@@ -99,3 +103,35 @@ def small_result(table):
         return dataclasses.replace(result, **changes)
 
     return make
+
+
+@pytest.fixture(scope="module")
+def recording(table):
+    """A 0.2 s x-motion step (-4 V, 4 V) of Table 4.2 from rest (50 samples of pre-roll)."""
+    u = np.zeros((300, 2))
+    u[50:250] = (-4.0, 4.0)
+    return simulate_recording(table, u, seed=1)
+
+
+@pytest.fixture(scope="module")
+def table_and_step(table):
+    """(Table 4.2, a 0.2 s step of it with unequal voltages (-4 V, 2 V), from rest)."""
+    u = np.zeros((300, 2))
+    u[50:250] = (-4.0, 2.0)
+    return table, simulate_recording(table, u, seed=4)
+
+
+@pytest.fixture(scope="module")
+def shooting_setup(table):
+    """(problem, uniform transcription, nodes on the simulated trajectory, the states) of a
+    0.25 s step (-4 V, 2 V) of Table 4.2, simulated with the stiffest window's substeps."""
+    u = np.zeros((400, 2))
+    u[50:300] = (-4.0, 2.0)
+    rec = simulate_recording(table, u, seed=4)
+    problem = build_problem([rec], table, FitOptions())
+    ms = MultipleShooting(problem).uniform()
+    p = problem.p_initial
+    n_sub = ms.substep_plan(p, problem.smoothing)["stiff"]
+    states = simulate(ms.model, p, problem.experiments[0].inputs, 1e-3, n_substeps=n_sub)
+    nodes = states[ms.window_start]
+    return problem, ms, nodes, states

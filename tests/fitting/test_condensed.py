@@ -10,30 +10,13 @@ from hframe_id.fitting import FitOptions
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.simulation.open_loop import simulate
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
 
-@pytest.fixture(scope="module")
-def setup():
-    truth = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    u = np.zeros((400, 2))
-    u[50:300] = (-4.0, 2.0)
-    rec = simulate_recording(truth, u, seed=4)
-    problem = build_problem([rec], truth, FitOptions())
-    ms = MultipleShooting(problem).uniform()
-    p = problem.p_initial
-    n_sub = ms.substep_plan(p, problem.smoothing)["stiff"]
-    states = simulate(ms.model, p, problem.experiments[0].inputs, 1e-3, n_substeps=n_sub)
-    nodes = states[ms.window_start]
-    return problem, ms, nodes, states
-
-
-def test_condensed_jacobian_is_the_single_shooting_jacobian(setup):
-    problem, ms, nodes, _ = setup
+def test_condensed_jacobian_is_the_single_shooting_jacobian(shooting_setup):
+    problem, ms, nodes, _ = shooting_setup
     theta = np.zeros(len(problem.free))
     ev = ms.evaluate(nodes, theta, problem.smoothing)
     gn = GaussNewton(ms)
@@ -56,16 +39,8 @@ def test_condensed_jacobian_is_the_single_shooting_jacobian(setup):
     assert sum(b.rows.size for b in blocks) == residual.size
 
 
-@pytest.fixture(scope="module")
-def hframe():
-    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    u = np.zeros((300, 2))
-    u[50:250] = (-4.0, 2.0)
-    return table, simulate_recording(table, u, seed=4)
-
-
-def test_the_prior_enters_the_cost_the_step_model_and_the_jacobian(hframe):
-    table, rec = hframe
+def test_the_prior_enters_the_cost_the_step_model_and_the_jacobian(table_and_step):
+    table, rec = table_and_step
     plain = build_problem([rec], table, FitOptions())
     problem = build_problem(
         [rec], table, FitOptions(consider_method="prior", consider={"k_b": 0.2})

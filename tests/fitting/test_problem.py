@@ -21,18 +21,6 @@ from hframe_id.recordings.simulated import simulate_recording
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
 
-@pytest.fixture(scope="module")
-def hframe():
-    return load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-
-
-@pytest.fixture(scope="module")
-def recording(hframe):
-    u = np.zeros((300, 2))
-    u[50:250] = (-4.0, 4.0)
-    return simulate_recording(hframe, u, seed=1)
-
-
 #: A small free set (stiffness, mass, viscous and Coulomb friction).
 FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
 
@@ -43,7 +31,7 @@ def step(table, x_step):
     return x_step(table, seed=7)
 
 
-def test_default_free_set_is_the_issues(hframe):
+def test_default_free_set_is_the_issues(table):
     free = default_free(build_model("hframe-8"))
     assert set(free) == {
         "k_l", "k_r", "k_b", "J_M1", "J_M2", "M_cart", "M_bridge", "B_M1", "B_M2",
@@ -53,99 +41,99 @@ def test_default_free_set_is_the_issues(hframe):
     assert "g_1" not in one_axis and "r" not in one_axis and "K_t" not in one_axis
 
 
-def test_unknown_free_parameter_suggests_the_nearest(hframe, recording):
+def test_unknown_free_parameter_suggests_the_nearest(table, recording):
     with pytest.raises(FitError, match=r"'k_q'.*did you mean 'k_l'|'k_q'.*did you mean"):
-        build_problem([recording], hframe, FitOptions(free=("k_q",)))
+        build_problem([recording], table, FitOptions(free=("k_q",)))
     with pytest.raises(FitError, match="J_m1.*did you mean 'J_M1'"):
-        build_problem([recording], hframe, FitOptions(fix=("J_m1",)))
+        build_problem([recording], table, FitOptions(fix=("J_m1",)))
 
 
-def test_theta_of_inverts_parameters(hframe, recording):
+def test_theta_of_inverts_parameters(table, recording):
     """theta -> parameters -> theta is the identity (log scale and linear alike), to rounding."""
-    problem = build_problem([recording], hframe, FitOptions(free=("k_l", "B_M1", "g_2")))
+    problem = build_problem([recording], table, FitOptions(free=("k_l", "B_M1", "g_2")))
     theta = np.array([0.3, -0.8, 0.05])
     values = dict(zip(problem.model.parameter_names, problem.parameters(theta), strict=True))
-    assert np.allclose(problem.theta_of(hframe.replace_values(**values)), theta, atol=1e-12)
+    assert np.allclose(problem.theta_of(table.replace_values(**values)), theta, atol=1e-12)
 
 
-def test_patterns_select_parameters(hframe, recording):
-    problem = build_problem([recording], hframe, FitOptions(free=("k_*",), fix=("k_b",)))
+def test_patterns_select_parameters(table, recording):
+    problem = build_problem([recording], table, FitOptions(free=("k_*",), fix=("k_b",)))
     assert problem.free_names == ("k_l", "k_r")
 
 
-def test_bounds_excluding_the_initial_value_fail_before_solving(hframe, recording):
+def test_bounds_excluding_the_initial_value_fail_before_solving(table, recording):
     with pytest.raises(FitError, match=r"bounds for k_l \[1, 2\] exclude its initial value"):
-        build_problem([recording], hframe, FitOptions(bounds={"k_l": (1.0, 2.0)}))
+        build_problem([recording], table, FitOptions(bounds={"k_l": (1.0, 2.0)}))
     with pytest.raises(FitError, match="not free"):
-        build_problem([recording], hframe, FitOptions(free=("k_r",), bounds={"k_l": (1, 2e5)}))
+        build_problem([recording], table, FitOptions(free=("k_r",), bounds={"k_l": (1, 2e5)}))
 
 
-def test_friction_reaches_zero_where_asked_or_started_there(hframe, recording):
+def test_friction_reaches_zero_where_asked_or_started_there(table, recording):
     """Friction (nonnegative) is fitted in log scale, and linearly from 0 where named in
     zero_reachable or started at 0 (Table 4.1's Coulomb terms): its default box then starts
     at 0, which is physics, not the box."""
-    zero = hframe.replace_values(F_c_cart=0.0)
+    zero = table.replace_values(F_c_cart=0.0)
     options = FitOptions(free=("F_c_cart", "b_cart", "B_M1", "k_l"), zero_reachable=("b_cart",))
     problem = build_problem([recording], zero, options)
     assert problem.linear.tolist() == [True, True, False, False]
     p = problem.parameters(problem.theta_lower)
     names = problem.model.parameter_names
     assert p[names.index("F_c_cart")] == 0.0 and p[names.index("b_cart")] == 0.0
-    assert p[names.index("B_M1")] == pytest.approx(hframe.values["B_M1"] / 10)
-    assert p[names.index("k_l")] == pytest.approx(hframe.values["k_l"] / 10)
+    assert p[names.index("B_M1")] == pytest.approx(table.values["B_M1"] / 10)
+    assert p[names.index("k_l")] == pytest.approx(table.values["k_l"] / 10)
     assert problem.zero_floor.tolist() == [True, True, False, False]
     assert problem.box_lower.tolist() == [False, False, True, True]
     assert problem.on_box(problem.theta_upper).all()
     assert not problem.on_box(problem.theta_lower)[:2].any()
     with pytest.raises(FitError, match="zero_reachable: k_l is not a nonnegative"):
-        build_problem([recording], hframe, FitOptions(zero_reachable=("k_l",)))
+        build_problem([recording], table, FitOptions(zero_reachable=("k_l",)))
 
 
-def test_mixed_variants_and_rigs_are_refused(hframe, recording):
+def test_mixed_variants_and_rigs_are_refused(table, recording):
     one_axis = load_parameter_file(MODELS / "one-axis-table2.3.yaml")
     other = simulate_recording(one_axis, np.full((300, 1), 5.0), seed=2)
     with pytest.raises(FitError, match="different model variants"):
-        build_problem([recording, other], hframe, FitOptions())
+        build_problem([recording, other], table, FitOptions())
     rig = dict(recording.rig, encoder_counts_per_rev=1000)
     coarse = dataclasses.replace(recording, rig=rig)
     with pytest.raises(FitError, match="different rigs.*encoder_counts_per_rev"):
-        build_problem([recording, coarse], hframe, FitOptions())
+        build_problem([recording, coarse], table, FitOptions())
     with pytest.raises(FitError, match="initial parameters are for one-axis"):
         build_problem([recording], one_axis, FitOptions())
 
 
-def test_too_few_valid_samples_are_refused(hframe, recording):
+def test_too_few_valid_samples_are_refused(table, recording):
     valid = recording.valid.copy()
     valid[:] = False
     valid[:9] = True
     sparse = dataclasses.replace(recording, valid=valid)
     with pytest.raises(FitError, match="only 36 valid output samples"):
-        build_problem([sparse], hframe, FitOptions())
+        build_problem([sparse], table, FitOptions())
 
 
-def test_invalid_samples_are_left_out(hframe, recording):
+def test_invalid_samples_are_left_out(table, recording):
     outputs = recording.outputs.copy()
     valid = recording.valid.copy()
     outputs[100:120, 2] = 1e3  # a laser holding garbage, flagged invalid
     valid[100:120, 2] = False
     flagged = dataclasses.replace(recording, outputs=outputs, valid=valid)
-    problem = build_problem([flagged], hframe, FitOptions())
+    problem = build_problem([flagged], table, FitOptions())
     exp = problem.experiments[0]
     assert not exp.valid[100:120, 2].any() and np.isnan(exp.measured[100:120, 2]).all()
 
 
-def test_weights_default_to_the_sensor_noise(hframe, recording):
-    problem = build_problem([recording], hframe, FitOptions())
+def test_weights_default_to_the_sensor_noise(table, recording):
+    problem = build_problem([recording], table, FitOptions())
     step = 2 * math.pi / 321084
     assert problem.channel_std[:2] == pytest.approx([step / math.sqrt(12)] * 2, rel=1e-12)
     assert problem.channel_std[2:] == pytest.approx([5e-6, 5e-6], rel=1e-12)
     assert problem.quantization[:2] == pytest.approx([step, step], rel=1e-12)
 
 
-def test_theta_of_a_linear_parameter_starting_at_zero_warns_nothing(hframe, recording):
+def test_theta_of_a_linear_parameter_starting_at_zero_warns_nothing(table, recording):
     """F_c_cart fitted linearly from 0 and at 0 (a reference file with it at 0): theta_of
     computes 0 / 0 for the unused log."""
-    start = hframe.replace_values(F_c_cart=0.0)
+    start = table.replace_values(F_c_cart=0.0)
     problem = build_problem([recording], start, FitOptions(free=("k_l", "F_c_cart")))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -197,18 +185,18 @@ def _sensor_std(recording, model):
     return np.array([default_channel_std(recording, s.name) for s in model.outputs])
 
 
-def test_the_problem_keeps_its_own_options_and_the_transcription_gets_its_own(hframe, recording):
+def test_the_problem_keeps_its_own_options_and_the_transcription_gets_its_own(table, recording):
     """Each link owns its options: the problem the ``problem_options`` (no solver or strategy
     settings), the transcription the ``transcription_options`` it is given (by default the
     model's, as ``FitOptions()`` resolves them)."""
     from hframe_id.fitting.shooting import MultipleShooting
 
     options = FitOptions(bound_factor=3.0, shooting_interval=25, max_iterations=7)
-    problem = build_problem([recording], hframe, options)
-    resolved = options.for_model(hframe.variant)
+    problem = build_problem([recording], table, options)
+    resolved = options.for_model(table.variant)
     assert problem.problem_options == resolved.problem_options
     assert not hasattr(problem, "options")
     given = MultipleShooting(problem, transcription=resolved.transcription_options)
     assert given.transcription == resolved.transcription_options and given.m == 25
-    default = FitOptions().for_model(hframe.variant).transcription_options
+    default = FitOptions().for_model(table.variant).transcription_options
     assert MultipleShooting(problem).transcription == default

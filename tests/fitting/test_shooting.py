@@ -10,9 +10,6 @@ from servo_outputs import servo_model_file, servo_recording, start
 from hframe_id.fitting import FitOptions
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.simulated import simulate_recording
-from hframe_id.simulation.open_loop import simulate
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
@@ -24,31 +21,16 @@ def servo(tmp_path_factory):
     return lambda variant: servo_model_file(folder, variant)[0]
 
 
-@pytest.fixture(scope="module")
-def setup():
-    truth = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    u = np.zeros((400, 2))
-    u[50:300] = (-4.0, 2.0)
-    rec = simulate_recording(truth, u, seed=4)
-    problem = build_problem([rec], truth, FitOptions())
-    ms = MultipleShooting(problem).uniform()
-    p = problem.p_initial
-    n_sub = ms.substep_plan(p, problem.smoothing)["stiff"]
-    states = simulate(ms.model, p, problem.experiments[0].inputs, 1e-3, n_substeps=n_sub)
-    nodes = states[ms.window_start]
-    return problem, ms, nodes, states
-
-
-def test_windows_reproduce_the_simulator(setup):
-    problem, ms, nodes, states = setup
+def test_windows_reproduce_the_simulator(shooting_setup):
+    problem, ms, nodes, states = shooting_setup
     ev = ms.evaluate(nodes, np.zeros(len(problem.free)), problem.smoothing)
     # Same RK4, same substeps: the window ends are the next nodes to rounding.
     assert np.max(np.abs(ev.x_end[:-1] - nodes[1:])) < 1e-10
     assert np.max(np.abs(ms.defects(ev, nodes))) < 1e-3  # in noise units
 
 
-def test_sensitivities_match_finite_differences(setup):
-    problem, ms, nodes, _ = setup
+def test_sensitivities_match_finite_differences(shooting_setup):
+    problem, ms, nodes, _ = shooting_setup
     theta = np.zeros(len(problem.free))
     ev = ms.evaluate(nodes, theta, problem.smoothing)
     w = 12  # a window in motion

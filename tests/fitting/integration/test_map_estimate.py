@@ -4,26 +4,15 @@ whole: the maximum a posteriori estimate moves by the linear Gaussian shrinkage.
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.parameters import load_parameter_file
-from hframe_id.recordings.simulated import simulate_recording
 
 MODELS = Path(__file__).resolve().parents[3] / "models"
 
 
-@pytest.fixture(scope="module")
-def hframe():
-    table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    u = np.zeros((300, 2))
-    u[50:250] = (-4.0, 2.0)
-    return table, simulate_recording(table, u, seed=4)
-
-
-def test_the_map_estimate_moves_by_the_linear_gaussian_shrinkage(hframe):
-    table, rec = hframe
+def test_the_map_estimate_moves_by_the_linear_gaussian_shrinkage(table_and_step):
+    table, rec = table_and_step
     # k_b starts (the prior's mean) 30 % above the truth that made the data. In a linear
     # Gaussian model the prior moves the estimate from the data's own theta_d towards its
     # mean by C / (C + sigma^2) of the way, C the data's (marginal) variance of theta.
