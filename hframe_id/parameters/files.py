@@ -178,6 +178,12 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     check_header(doc, _REQUIRED_HEADER, _OPTIONAL_HEADER, where)
     _check_format_version(doc["format_version"], where)
     model = doc["model"]
+    # Checked first: a file of another model is refused without running its model file
+    # (the fit's known points look through every parameter file beside the reference).
+    if variant is not None and model != variant:
+        raise ParameterFileError(
+            f"{where}: model is {shown(model)}, but {variant!r} is needed here"
+        )
     if model not in variants() and "model_file" in doc:
         load_model_file(path.parent / str(doc["model_file"]))
     known = variants()
@@ -185,10 +191,6 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
         raise ParameterFileError(
             f"{where}: model {shown(model)} is not a variant{suggest(str(model), list(known))};"
             f" valid: {', '.join(known)} (a model of your own: --model-file FILE.py)"
-        )
-    if variant is not None and model != variant:
-        raise ParameterFileError(
-            f"{where}: model is {shown(model)}, but {variant!r} is needed here"
         )
     for key in ("references",):
         if key in doc and not isinstance(doc[key], list):
