@@ -4,6 +4,7 @@ correlated parameters, said in words."""
 from types import SimpleNamespace
 
 import numpy as np
+from correlated_results import CHAIN, correlated_result
 
 from hframe_id.fitting.report_tables import (
     correlated_groups,
@@ -13,32 +14,14 @@ from hframe_id.fitting.report_tables import (
 )
 
 
-def _result(correlation, identified_by=None):
-    names = ("k_l", "k_r", "J_M1", "B_M1")
-    identified_by = identified_by or {}
-    estimates = {
-        n: SimpleNamespace(key=f"{n} [unit]", identified_by=identified_by.get(n, ())) for n in names
-    }
-    return SimpleNamespace(free_names=names, correlation=np.array(correlation), estimates=estimates)
-
-
-#: k_l-k_r strongly, k_r-J_M1 strongly (a chain: one group of three), B_M1 apart.
-CHAIN = [
-    [1.0, 0.97, 0.5, 0.1],
-    [0.97, 1.0, -0.93, 0.0],
-    [0.5, -0.93, 1.0, 0.2],
-    [0.1, 0.0, 0.2, 1.0],
-]
-
-
 def test_groups_are_connected_components_strongest_first():
-    groups = correlated_groups(_result(CHAIN))
+    groups = correlated_groups(correlated_result(CHAIN))
     assert [g for g, _ in groups] == [("k_l", "k_r", "J_M1")]
     assert groups[0][1] == 0.97
 
 
 def test_a_sentence_per_group_with_design_advice_when_the_fitter_gave_any():
-    lines = correlation_lines(_result(CHAIN, {"J_M1": ("6V_ymotion",)}))
+    lines = correlation_lines(correlated_result(CHAIN, {"J_M1": ("6V_ymotion",)}))
     text = "\n".join(lines)
     assert "combination of the parameters much better than each one" in text
     assert "- k_l [unit], k_r [unit], J_M1 [unit] (|r| up to 0.970)" in text
@@ -47,7 +30,9 @@ def test_a_sentence_per_group_with_design_advice_when_the_fitter_gave_any():
 
 
 def test_uncorrelated_parameters_are_said_to_be_so():
-    assert correlation_lines(_result(np.eye(4))) == ["No two free parameters have |r| >= 0.9."]
+    assert correlation_lines(correlated_result(np.eye(4))) == [
+        "No two free parameters have |r| >= 0.9."
+    ]
 
 
 def test_a_markdown_table_has_a_header_a_rule_and_a_row_per_entry():
