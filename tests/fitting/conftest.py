@@ -135,3 +135,18 @@ def shooting_setup(table):
     states = simulate(ms.model, p, problem.experiments[0].inputs, 1e-3, n_substeps=n_sub)
     nodes = states[ms.window_start]
     return problem, ms, nodes, states
+
+
+@pytest.fixture(scope="module")
+def exact_shooting(shooting_setup):
+    """(problem, uniform transcription, nodes) of ``shooting_setup``'s step with outputs that
+    are the transcription's own simulation of Table 4.2 (no noise, no quantisation) and
+    k_b, M_cart, b_bridge free: the optimum is the start, theta = 0, with cost and
+    continuity defects 0, a reference the solvers must reach from nearby."""
+    problem, ms, nodes, states = shooting_setup
+    experiment = problem.experiments[0]
+    exact = dataclasses.replace(experiment.recording, outputs=states[:-1] @ ms.c.T)
+    options = FitOptions(free=("k_b", "M_cart", "b_bridge"))
+    exact_problem = build_problem([exact], problem.initial, options)
+    exact_ms = MultipleShooting(exact_problem).uniform()
+    return exact_problem, exact_ms, states[exact_ms.window_start]

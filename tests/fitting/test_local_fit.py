@@ -1,0 +1,179 @@
+"""One fit inside one box (``fitting.local_fit``): the rules between its stages, each on
+hand-made inputs. The misfit judgement, the identifiability holds and the coordinates no
+output measures; the stages themselves: test_stages.py; whole fits: integration/."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hframe_id.fitting import FitOptions, local_fit
+from hframe_id.fitting.problem import build_problem
+from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.parameters import load_parameter_file
+from hframe_id.recordings.simulated import simulate_recording
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+# --- the misfit judgement -------------------------------------------------------------
+
+
+def _judged(result, estimated=False):
+    """``result`` judged on residuals of 3 (the problem's noise units) in every used sample
+    and 100 in an unused one, the problem's noise levels twice the sensors': the residual
+    rms in sensor std is 3 x 2 = 6."""
+    residual = np.full((2, 3, 2), 3.0)
+    residual[1, 2, 0] = 100.0
+    weight = np.ones_like(residual)
+    weight[1, 2, 0] = 0.0
+    ms = SimpleNamespace(weight=weight, problem=SimpleNamespace(channel_std=np.array([2.0, 2.0])))
+    state = SimpleNamespace(evaluation=SimpleNamespace(residual=residual))
+    return local_fit._misfit_judged(result, ms, state, np.array([1.0, 1.0]), estimated)
+
+
+def test_the_misfit_is_the_rms_over_used_samples_in_sensor_noise_units(small_result):
+    judged = _judged(small_result())
+    assert judged.diagnostics.residual_rms_sensor_std == pytest.approx(6.0, rel=1e-12)
+
+
+def test_a_fit_beyond_the_default_misfit_limit_fails_saying_so(small_result):
+    judged = _judged(small_result())
+    assert not judged.success
+    assert judged.message.startswith(
+        "converged to a poor fit: residual rms 6 x the sensors' noise (limit 5, the default)"
+    )
+
+
+@pytest.mark.parametrize(
+    ("max_misfit", "estimated", "success"),
+    [(10.0, False, True), (4.0, False, False), (None, True, True), (4.0, True, False)],
+)
+def test_the_users_limit_applies_and_estimated_noise_levels_have_none_by_default(
+    small_result, max_misfit, estimated, success
+):
+    options = FitOptions(free=("k_l",), max_misfit=max_misfit)
+    judged = _judged(small_result(options=options), estimated)
+    assert judged.success is success
+    if not success:
+        assert "FitOptions.max_misfit / --max-misfit" in judged.message
+
+
+def test_a_failed_fit_keeps_its_message_and_gets_its_misfit(small_result):
+    judged = _judged(small_result(success=False, message="stalled"))
+    assert (judged.success, judged.message) == (False, "stalled")
+    assert judged.diagnostics.residual_rms_sensor_std == pytest.approx(6.0, rel=1e-12)
+
+
+# --- the identifiability holds ---------------------------------------------------------
+
+
+def _holds(monkeypatch, rounds, prior=(0.0, 0.0, 0.0), converged=True, rms=1.0):
+    """``_hold_unidentified`` on free parameters a, b, c whose relative standard errors are
+    ``rounds[0]`` at the fit and ``rounds[k]`` (of the parameters still active) after the
+    k-th solve again; returns (held, the active flags and theta of each solve again)."""
+    stats = [
+        SimpleNamespace(
+            relative_std=np.array(r),
+            relative_std_gn=np.array(r) / 2,
+            collinearity=np.full(len(r), 0.9),
+        )
+        for r in rounds
+    ]
+    resolved = []
+    cost = SimpleNamespace(cost=0.0)  # the residual rms is ``rms`` whatever the cost
+
+    def resolve(theta, active):
+        resolved.append((active.tolist(), theta.tolist()))
+        return SimpleNamespace(active=active, theta=theta, evaluation=cost), None
+
+    monkeypatch.setattr(
+        local_fit, "_stats", lambda gn, state, problem, method: stats[len(resolved)]
+    )
+    problem = SimpleNamespace(
+        free=(0, 1, 2), free_names=("a", "b", "c"), prior_weight=np.array(prior)
+    )
+    ms = SimpleNamespace(residual_rms=lambda cost: rms)
+    state = SimpleNamespace(
+        active=np.ones(3, dtype=bool), theta=np.array([0.1, 0.2, 0.3]), evaluation=cost
+    )
+    stages = [SimpleNamespace(converged=converged)]
+    options = FitOptions(identifiability_threshold=0.1)
+    _, _, _, held = local_fit._hold_unidentified(
+        problem, options, ms, state, None, stats[0], stages, resolve
+    )
+    return held, resolved
+
+
+def test_the_worst_parameter_is_held_first_and_the_rest_solved_again(monkeypatch):
+    """c (200 %) is held first, at its initial value (theta 0); then b (30 % after that
+    solve); a (5 %) stays free."""
+    held, resolved = _holds(monkeypatch, [[0.05, 0.5, 2.0], [0.05, 0.3], [0.05]])
+    assert list(held) == ["c", "b"]
+    assert held["c"] == (2.0, 1.0, 0.9) and held["b"] == (0.3, 0.15, 0.9)
+    assert resolved == [
+        ([True, True, False], [0.1, 0.2, 0.0]),
+        ([True, False, False], [0.1, 0.0, 0.0]),
+    ]
+
+
+def test_parameters_the_data_plainly_do_not_determine_are_held_together(monkeypatch):
+    """Over 100 % (HOPELESS_STD) b and c are held at once with the worst, in one solve."""
+    held, resolved = _holds(monkeypatch, [[0.05, 1.5, 2.0], [0.05]])
+    assert set(held) == {"b", "c"}
+    assert [active for active, _ in resolved] == [[True, False, False]]
+
+
+def test_a_parameter_with_a_prior_is_never_held(monkeypatch):
+    held, resolved = _holds(monkeypatch, [[0.05, 0.08, 5.0]], prior=(0.0, 0.0, 1.0))
+    assert held == {} and resolved == []
+
+
+@pytest.mark.parametrize(("rms", "holds"), [(1.2, True), (2.0, False)])
+def test_an_unconverged_fit_holds_only_at_the_noise_level(monkeypatch, rms, holds):
+    """Below MISFIT = 1.5 noise std a sloppy direction is the likely reason for the stall
+    (holding helps); above it the errors mean nothing and nothing is held."""
+    held, _ = _holds(monkeypatch, [[0.05, 0.05, 0.5], [0.05, 0.05]], converged=False, rms=rms)
+    assert bool(held) is holds
+
+
+def test_holding_the_last_free_parameter_solves_nothing_again(monkeypatch):
+    held, resolved = _holds(monkeypatch, [[2.0, 3.0, 4.0]])
+    assert set(held) == {"a", "b", "c"} and resolved == []
+
+
+# --- coordinates no output measures ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def one_axis_shooting():
+    """The one-axis model's transcription of a short 5 V pulse (Table 2.3)."""
+    params = load_parameter_file(MODELS / "one-axis-table2.3.yaml")
+    u = np.zeros((200, 1))
+    u[20:120] = 5.0
+    recording = simulate_recording(params, u, seed=1)
+    problem = build_problem([recording], params, FitOptions().for_model("one-axis"))
+    return problem, MultipleShooting(problem)
+
+
+def test_every_h_frame_coordinate_is_measured(shooting_setup):
+    """hframe-8: encoders on both motors, lasers on x and y."""
+    problem, ms, _, _ = shooting_setup
+    assert local_fit._measured_coordinates(ms).all()
+    assert not local_fit._unmeasured_coordinates(ms)
+    assert local_fit._springs_at_unmeasured_coordinates(problem, ms) == []
+
+
+def test_the_one_axis_idler_is_unmeasured_and_held_by_k2_and_k3(one_axis_shooting):
+    """One-axis (section 2.2): outputs phi1 (encoder) and x (laser), none on the idler phi3;
+    the belt sections on either side of the idler, k2 (cart-idler) and k3 (idler-motor),
+    pull on it, k1 (motor-cart) does not."""
+    problem, ms = one_axis_shooting
+    names = [c.name for c in ms.model.coordinates]
+    measured = dict(zip(names, local_fit._measured_coordinates(ms).tolist(), strict=True))
+    assert measured == {"phi1": True, "x": True, "phi3": False}
+    assert local_fit._unmeasured_coordinates(ms)
+    springs = local_fit._springs_at_unmeasured_coordinates(problem, ms)
+    assert [problem.free_names[i] for i in springs] == ["k2", "k3"]
