@@ -6,7 +6,8 @@ instead of failing after seconds or minutes of computing, and writes nothing. Th
 checks, for each output: that it is of the right kind (a file where a file goes, a folder
 where a folder goes), that it does not exist unless ``--force`` is given, that its folder
 exists (or can be made), can be reached (every folder on the way searchable) and that new files
-can be created there, and that an existing file given with ``--force`` is not read-only.
+can be created there, and that an existing file or folder it replaces (given ``--force``) is not
+read-only.
 Writability is probed by creating (and at once removing) a temporary file where the output
 would go: the permission bits say little when running as root or on special file systems
 such as /proc.
@@ -78,13 +79,18 @@ def _nearest_folder(path: Path, option: str, target: Path) -> Path:
     return folder
 
 
-def _check_target(path: Path, option: str, force: bool, folder: bool) -> None:
+def _check_target(
+    path: Path, option: str, force: bool, folder: bool, replaced: bool = True
+) -> None:
     """``path`` is of the kind it will be written as, and new unless ``force``. An output
     is put in place by a rename, which would replace a device, a pipe or a socket (as root,
     ``--out /dev/null --force`` would delete the system's /dev/null): those are refused even
-    with ``--force``. So is a read-only file: the rename would replace it (its folder being
-    writable), which its owner made it read-only to prevent. Root may write any file, and
-    ``os.access`` says so."""
+    with ``--force``. So is a read-only file or folder that the output ``replaced`` as a
+    whole: the rename would replace a file (its folder being writable), which its owner made
+    it read-only to prevent; a folder is first moved aside (``Staging.commit``), a rename
+    that needs write permission on the folder itself (its ``..`` entry), and would fail
+    after the command's work. Root may write anything, and ``os.access`` says so. A folder
+    written into (``replaced`` False) is checked by ``_probe``."""
     _reachable(path, option, path)
     if folder and path.exists() and not path.is_dir():
         raise OptionError(f"{option} {path}: exists and is not a directory")
@@ -96,7 +102,7 @@ def _check_target(path: Path, option: str, force: bool, folder: bool) -> None:
         )
     if (path.exists() or path.is_symlink()) and not force:
         raise OptionError(f"{option} {path}: exists already; pass --force to replace it")
-    if not folder and path.is_file() and not os.access(path, os.W_OK):
+    if replaced and (path.is_file() or path.is_dir()) and not os.access(path, os.W_OK):
         raise OptionError(
             f"{option} {path}: exists and is read-only; make it writable or remove it first"
         )
@@ -148,7 +154,7 @@ def check_dir(
     ``force``. With ``empty`` the folder is the output, filled as a whole: it must not exist
     or be empty. Creates nothing."""
     path = Path(path)
-    _check_target(path, option, force=True, folder=True)
+    _check_target(path, option, force=True, folder=True, replaced=empty)
     if empty and path.is_dir():
         try:
             filled = any(path.iterdir())

@@ -131,6 +131,25 @@ class Dataset:
             self.kinds,
         )
 
+    @property
+    def excites(self) -> bool:
+        """Whether the record can tell anything of the model's parameters: some input the
+        plant saw changes value over it (compared exactly: a protocol holds its voltage
+        sample after sample), or the plant does not stay at rest (``starts_at_rest`` over
+        the whole record: a trend of some channel beyond ``REST_Z`` standard errors of its
+        sensor noise, the test that decides a fit's initial velocities). Constant inputs and
+        a plant at rest throughout: every parameter value simulates the same record."""
+        if np.any(self.inputs != self.inputs[:1]):
+            return True
+        return not starts_at_rest(
+            self.measured,
+            self.valid,
+            self.noise_std,
+            self.n_samples,
+            self.sample_period_s,
+            self.kinds,
+        )
+
     def delayed(self, latency: Mapping[str, int]) -> Dataset:
         """The dataset with each channel named in ``latency`` advanced by its latency of d
         samples (``FitOptions.latency_samples``), its last d samples invalid; ``at_rest`` as
@@ -145,6 +164,21 @@ class Dataset:
                 valid[-lag:, j] = False
         moved = replace(self, measured=np.where(valid, measured, np.nan), valid=valid)
         return replace(moved, at_rest=moved.shows_rest())
+
+
+def check_excitation(experiments: Sequence[Dataset]) -> tuple[str, ...]:
+    """The names of the ``experiments`` that do not excite the model (``Dataset.excites``),
+    which a fit together with one that does may carry; ``FitError`` naming the recordings
+    and their inputs if not one excites it (a fit of them would end "converged" with no
+    parameter identified)."""
+    resting = tuple(e.name for e in experiments if not e.excites)
+    if experiments and len(resting) == len(experiments):
+        raise FitError(
+            f"{', '.join(resting)}: nothing excites the model: inputs "
+            f"{', '.join(experiments[0].input_names)} constant and the plant at rest "
+            f"throughout {'the recording' if len(resting) == 1 else 'every recording'}"
+        )
+    return resting
 
 
 def state_outputs(model: Model) -> np.ndarray:

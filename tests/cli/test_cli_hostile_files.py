@@ -34,11 +34,15 @@ def _parameter_file(path: Path, edit: Callable[[str], str]) -> Path:
 
 
 def _recording(
-    path: Path, payload: Callable[[int, dict], bytes | dict], rig: dict | None = None
+    path: Path,
+    payload: Callable[[int, dict], bytes | dict],
+    rig: dict | None = None,
+    source: Path = REC,
 ) -> Path:
-    """4V_xmotion.mcap with each sample message ``i`` replaced by ``payload(i, message)``
-    (bytes as they are, a dict as JSON) and the ``rig`` metadata updated with ``rig``."""
-    with REC.open("rb") as source, path.open("wb") as out:
+    """``source`` (4V_xmotion.mcap) with each sample message ``i`` replaced by ``payload(i,
+    message)`` (bytes as they are, a dict as JSON) and the ``rig`` metadata updated with
+    ``rig``."""
+    with source.open("rb") as source, path.open("wb") as out:
         reader = make_reader(source)
         summary = reader.get_summary()
         writer = Writer(out)

@@ -4,7 +4,8 @@ Permission bits do not stop root, and the CI runs the tests as root: there each 
 in a subprocess as an unprivileged user (``UNPRIVILEGED_UID``), in a folder made for it;
 otherwise directly as the user running the tests. Every case must end in one line
 ``hframe-id: error: ...`` naming the path and the problem, exit status 2, no traceback,
-before any work, and leave nothing behind.
+before any work, and leave nothing behind. Save one: a fit never replaces a parameter file,
+read-only or not; it writes beside it, under the next free id.
 """
 
 from __future__ import annotations
@@ -16,9 +17,14 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
+
+from hframe_id.digests import sha256_file
+from hframe_id.fitting.output import make_fit_id
+from hframe_id.fleet.store import ResultsStore
 
 REPO = Path(__file__).resolve().parents[2]
 H8 = REPO / "models" / "hframe-8-table4.2.yaml"
@@ -289,6 +295,77 @@ def test_read_only_file_is_not_replaced_even_with_force(runner, folder, argv, na
     result = runner(_argv(argv, folder, out) + force, folder)
 
     _refused(result, str(out), "exists and is read-only")
+    assert _listing(folder) == before
+
+
+#: Seconds ahead for which ``test_fit_writes_beside_a_read_only_parameter_file_of_its_id``
+#: lays the fit's files: longer than the fit (4 s as the unprivileged user, fresh cache).
+FIT_WINDOW_S = 120
+
+
+def test_fit_writes_beside_a_read_only_parameter_file_of_its_id(runner, folder):
+    """A fit's id is its variant, data and second (``make_fit_id``); where the folder holds a
+    file of that id already, the fit takes the next free one (``unused_fit_id``): a read-only
+    parameter file of the id, in a folder that accepts new files, is left as it is, and the
+    fit written beside it. Every id of the next ``FIT_WINDOW_S`` seconds is taken."""
+    fits = _prepare(folder, "fits", 0o755)
+    data = [sha256_file(RECORDING)]
+    now = datetime.now(UTC)
+    ids = [make_fit_id("one-axis", data, now + timedelta(seconds=s)) for s in range(FIT_WINDOW_S)]
+    for fit_id in ids:
+        _prepare(fits, f"{fit_id}.yaml", 0o444, "kept\n")
+    before = _listing(folder)
+
+    argv = ["fit", str(RECORDING), "--free", "b", "--no-first-stage", "--no-plots"]
+    result = runner([*argv, "--no-cross-validation", "--quiet", "--out-dir", str(fits)], folder)
+
+    assert result.returncode == 0, result.stderr
+    after = _listing(folder)
+    new = sorted(set(after) - set(before))
+    assert len(new) == 2 and new[0].endswith("-2-report.md") and new[1].endswith("-2.yaml"), new
+    assert new[1].removeprefix("fits/").removesuffix("-2.yaml") in ids
+    assert {name: after[name] for name in before} == before
+    assert all((fits / f"{fit_id}.yaml").stat().st_mode & 0o777 == 0o444 for fit_id in ids)
+
+
+def _results(path: Path) -> Path:
+    """A results store of one rig's two fits, enough for ``fleet report``."""
+    store = ResultsStore(path)
+    for day, value in ((5, 13000.0), (12, 15000.0)):
+        store.add(
+            {
+                "key": f"k{day}",
+                "rig": "rig-01",
+                "run_time": datetime(2026, 1, day, tzinfo=UTC),
+                "status": "ok",
+                "message": "",
+                "k_l [N/m]": value,
+                "k_l std [N/m]": 10.0,
+                "k_l ci95 low [N/m]": value - 20,
+                "k_l ci95 high [N/m]": value + 20,
+                "k_l identified": True,
+            }
+        )
+    store.flush()
+    return path
+
+
+def test_read_only_folder_is_not_replaced_even_with_force(runner, folder):
+    """``fleet report --force`` replaces its plots folder as a whole: moving the old one
+    aside needs write permission on it, refused before the report is drawn instead of failing
+    when it is put in place."""
+    results = _results(folder / "r.parquet")
+    report = _prepare(folder, "report", 0o755)
+    _prepare(report, "fleet-report.md", 0o644, "kept\n")
+    plots = _prepare(report, "plots", 0o755)
+    _prepare(plots, "k_l.png", 0o644, "kept\n")
+    before = _listing(folder)
+    plots.chmod(0o555)
+
+    argv = ["fleet", "report", str(results), "--out", str(report), "--force"]
+    result = runner(argv, folder)
+
+    _refused(result, f"--out {plots}", "exists and is read-only")
     assert _listing(folder) == before
 
 
