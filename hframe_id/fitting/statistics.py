@@ -169,6 +169,12 @@ def compute_statistics(
     # carries no usable information: zero, so the statistics say so instead of raising.
     jac = np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
     residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
+    # ... and so does a finite one too large to square (1e200: its information overflows;
+    # an IPOPT continuation of a worn plant's fit raised a LinAlgError there). Once every
+    # diagonal entry is finite so is the rest (Cauchy-Schwarz).
+    with np.errstate(over="ignore", invalid="ignore"):
+        overflowing = ~np.isfinite(np.einsum("ij,ij->j", jac, jac))
+    jac[:, overflowing] = 0.0
     info = jac.T @ jac
     scale = np.sqrt(np.maximum(np.diag(info), 1e-300))
     inv_s = np.linalg.pinv(info / np.outer(scale, scale), rcond=1e-13, hermitian=True)

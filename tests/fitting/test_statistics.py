@@ -119,3 +119,18 @@ def test_statistics_of_data_without_information_do_not_raise():
     assert np.isfinite(stats.relative_std[0])
     assert not stats.relative_std[1] < 1e6  # undetermined: huge or infinite
     assert np.isinf(stats.collinearity[1])
+
+
+def test_statistics_of_sensitivities_too_large_to_square_do_not_raise():
+    """A finite sensitivity of 1e200 overflows J^T J (a LinAlgError in the collinearity's
+    elimination of the initial states): that parameter is undetermined, the others not."""
+    from hframe_id.fitting.statistics import Block, compute_statistics
+
+    rng = np.random.default_rng(1)
+    jac = rng.normal(size=(200, 4))  # one initial-state column, then three parameters
+    jac[:, 3] *= 1e200
+    residual = rng.normal(size=200)
+    block = Block("e:phi1", np.arange(200), 1.0, 0.0, np.zeros(200))
+    stats = compute_statistics(jac, residual, [block], 1, ("a", "b", "c"), "robust")
+    assert np.all(np.isfinite(stats.relative_std[:2]))
+    assert not stats.relative_std[2] < 1e6
