@@ -86,9 +86,35 @@ def fit_recordings(
     # an output-error fit. A prediction-error fit (continuity "none", for plants whose
     # simulation drifts) has no such criterion to compare by.
     if options.continuity == "exact":
-        result = _never_worse_than_known(recordings, initial, options, result)
+        result = _explaining_the_data(
+            recordings, _never_worse_than_known(recordings, initial, options, result)
+        )
     result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
+
+
+def _explaining_the_data(recordings, result: FitResult) -> FitResult:
+    """``result``, failed if it succeeded without simulating the records better than the
+    model-free prediction that nothing moves (``known_points.held_criterion``: each channel
+    held at its first samples) by more than ``LIKELIHOOD_RATIO_95``: a fit of records whose
+    inputs do not drive what the outputs show (a red-team record with its voltages zeroed
+    and its motion kept) ended "success", every parameter not identified."""
+    if not result.success:
+        return result
+    criterion = Criterion.of(result, recordings)
+    report = result.diagnostics.known_points
+    own = report.fit if report else criterion(result.parameters, judged_starts(result))
+    held = criterion.held(result.parameters.variant)
+    if own < held - LIKELIHOOD_RATIO_95:
+        return result
+    return replace(
+        result,
+        success=False,
+        message=f"the fitted model explains none of the data: simulated from the records' "
+        f"start it is no closer to them than every channel held still ({criterion.name}: "
+        f"{own:.6g} against {held:.6g}); the inputs do not drive what the outputs show "
+        f"under this model; {result.message}",
+    )
 
 
 def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:

@@ -115,20 +115,54 @@ def simulation_criterion(
     simulation fails or leaves the finite numbers."""
     from hframe_id.validation.replay import simulate_channels
 
-    latency = latency_samples or {}
     starts = [None] * len(recordings) if initial_states is None else initial_states
-    squares: dict[str, float] = {}
-    counts: dict[str, int] = {}
+    predictions = []
     for recording, x0 in zip(recordings, starts, strict=True):
         try:
-            data, simulated = simulate_channels(params, recording, x0)
+            predictions.append(simulate_channels(params, recording, x0))
         except (HframeIdError, ArithmeticError, RuntimeError):
             return math.inf
+    return _criterion(predictions, channel_std, latency_samples, concentrated)
+
+
+def held_criterion(
+    recordings: Sequence[Recording],
+    channel_std: dict[str, float],
+    latency_samples: dict[str, int] | None,
+    concentrated: bool,
+    variant: str,
+) -> float:
+    """C of the model-free prediction that nothing moves: each channel of each recording
+    held at the mean of its valid samples (``variant``'s channels; the reference of a 0 %
+    simulation fit), under the same noise levels and latencies as ``simulation_criterion``.
+    A fit no better than this explains none of the data."""
+    from hframe_id.models import build_model
+    from hframe_id.validation.replay import channels
+
+    model = build_model(variant)
+    predictions = []
+    for recording in recordings:
+        data = channels(model, recording)
+        held = np.zeros_like(data.measured)
+        for j in range(data.measured.shape[1]):
+            valid = data.measured[data.valid[:, j], j]
+            held[:, j] = valid.mean() if valid.size else 0.0
+        predictions.append((data, held))
+    return _criterion(predictions, channel_std, latency_samples, concentrated)
+
+
+def _criterion(predictions, channel_std, latency_samples, concentrated: bool) -> float:
+    """C of (``Dataset``, predicted outputs (N, n_y) [SI]) per recording (module docstring):
+    a channel lagging by d samples is compared at sample k + d with the prediction at k."""
+    latency = latency_samples or {}
+    squares: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    for data, predicted in predictions:
         for j, name in enumerate(data.names):
             d = int(latency.get(name, 0))
             n = data.measured.shape[0] - d
             valid = data.valid[d:, j]
-            residual = (data.measured[d:, j] - simulated[:n, j])[valid]
+            residual = (data.measured[d:, j] - predicted[:n, j])[valid]
             squares[name] = squares.get(name, 0.0) + float(residual @ residual)
             counts[name] = counts.get(name, 0) + int(valid.sum())
     if concentrated:
@@ -206,6 +240,12 @@ class Criterion:
                 self.concentrated,
             )
             for initial_states in (starts or (None,))
+        )
+
+    def held(self, variant: str) -> float:
+        """C of the prediction that nothing moves (``held_criterion``)."""
+        return held_criterion(
+            self.recordings, self.channel_std, self.latency_samples, self.concentrated, variant
         )
 
     @property

@@ -58,3 +58,27 @@ def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, step
     assert floored == pytest.approx(expected, rel=1e-12)
     unfloored = simulation_criterion(truth, steps, dict.fromkeys(floors, 1e-12), concentrated=True)
     assert floored > unfloored
+
+
+def test_the_held_criterion_is_each_channel_held_at_its_mean(truth, steps):
+    """The prediction that nothing moves: each record's channels at their means, judged as
+    the simulation criterion judges (here chi^2 / 2 under unit levels: SSR / 2 about each
+    record's mean), and worse than the plant's own simulation."""
+    from hframe_id.fitting.known_points import held_criterion
+    from hframe_id.models import build_model
+    from hframe_id.validation.replay import channels
+
+    model = build_model("hframe-8")
+    expected = 0.0
+    for rec in steps:
+        data = channels(model, rec)
+        for j in range(len(data.names)):
+            y = data.measured[data.valid[:, j], j]
+            expected += 0.5 * float(np.sum((y - y.mean()) ** 2))
+    units = dict.fromkeys(channels(model, steps[0]).names, 1.0)
+    assert held_criterion(steps, units, None, False, "hframe-8") == pytest.approx(
+        expected, rel=1e-12
+    )
+    floors = dict.fromkeys(units, 1e-12)
+    held = held_criterion(steps, floors, None, True, "hframe-8")
+    assert simulation_criterion(truth, steps, floors, concentrated=True) < held
