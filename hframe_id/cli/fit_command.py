@@ -506,27 +506,6 @@ def _write_outputs(
     return fit_id, parameter_file, report
 
 
-def _check_excitation(recordings: list[Recording], initial: ParameterSet) -> None:
-    """``FitError`` before any fitting work if no recording excites the model (``fitting.
-    dataset.check_excitation``), a warning naming each one that does not beside others that
-    do. Recordings whose channels are not the model's are left to the fit's own checks,
-    which name what does not match."""
-    from hframe_id.fitting.dataset import Dataset, check_excitation
-    from hframe_id.models import build_model
-
-    model = build_model(initial.variant)
-    try:
-        experiments = [Dataset.from_recording(model, rec) for rec in recordings]
-    except FitError:
-        return
-    for name in check_excitation(experiments):
-        print(
-            f"hframe-id: warning: {name}: inputs constant and the plant at rest throughout; "
-            "it tells nothing of the parameters",
-            file=sys.stderr,
-        )
-
-
 def _inputs(args: argparse.Namespace, options: FitOptions):
     """The recordings (``paths``, ``recordings``), the start (``initial``, ``initial_path``),
     the fitted ``variant`` and the options with the model's defaults, read and checked."""
@@ -547,7 +526,6 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
     variant = model or recordings[0].variant
     if not model:
         initial, initial_path = _initial(args, variant)
-    _check_excitation(recordings, initial)
     options = options.for_model(variant)
     if args.known:
         from hframe_id.parameters import load_parameter_file

@@ -15,6 +15,7 @@ from __future__ import annotations
 import difflib
 import fnmatch
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -22,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.dataset import Dataset
+from hframe_id.fitting.dataset import Dataset, check_excitation
 from hframe_id.fitting.experiment import check_rigs, encoder_step
 from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model
@@ -392,7 +393,8 @@ def _experiments(
     """The recordings on the model's channels (``Dataset.from_recording``) advanced by their
     ``latency_samples`` (``Dataset.delayed``); ``FitError`` for ``channel_std`` or
     ``latency_samples`` naming no output, a record not longer than a ``shooting_interval``
-    [samples], or an output with no valid sample."""
+    [samples], an output with no valid sample, or records of which none excites the model
+    (``dataset.check_excitation``; a warning names each one at rest among others)."""
     outputs = [s.name for s in model.outputs]
     for name in wanted.channel_std:
         if name not in outputs:
@@ -417,6 +419,12 @@ def _experiments(
         empty = [name for j, name in enumerate(outputs) if not e.valid[:, j].any()]
         if empty:
             raise FitError(f"{e.name}: no valid sample of output {', '.join(empty)}")
+    for name in check_excitation(experiments):
+        warnings.warn(
+            f"{name}: inputs constant and the plant at rest throughout; it tells nothing of "
+            "the parameters",
+            stacklevel=2,
+        )
     return experiments
 
 

@@ -74,12 +74,13 @@ def test_fit_of_a_declared_model_refuses_it_too(work, capsys):
 
 
 def test_fit_warns_of_a_recording_at_rest_among_others(work, capsys, monkeypatch):
-    """Fitted with the others (the fit itself, seconds, stood in for by a refusal)."""
+    """Fitted with the others (the solve itself, seconds, stood in for by a refusal once the
+    problem is built)."""
 
     def stopped(*args, **kwargs):
         raise FitError("stopped before fitting")
 
-    monkeypatch.setattr("hframe_id.fitting.fit_recordings", stopped)
+    monkeypatch.setattr("hframe_id.fitting.local_fit.MultipleShooting", stopped)
     rec = _held(work / "rest.mcap")
     assert main(["fit", str(rec), str(REC), "--quiet", "--no-plots", "--out-dir", "f"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
