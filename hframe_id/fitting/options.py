@@ -1,8 +1,12 @@
 """Options of a fit: which parameters are free, bounds, weights, transcription and solver.
 
-``FitOptions`` validates every field on construction with a message a user can act on; the
-checks that need the model or the data (unknown parameter names, bounds that exclude the
-initial value) run in :mod:`hframe_id.fitting.problem` before any solving starts.
+Each link of the fitter's chain has its own frozen options (``ProblemOptions``,
+``TranscriptionOptions``, ``SolverOptions``, ``StatisticsOptions``) that check their fields on
+construction with a one-line message a user can act on, so a link used on its own is checked
+too. ``FitOptions``, the flat set a user gives, is checked by building those parts and by its
+own checks of the strategy's settings. The checks that need the model or the data (unknown
+parameter names, bounds that exclude the initial value) run in
+:mod:`hframe_id.fitting.problem` before any solving starts.
 """
 
 from __future__ import annotations
@@ -13,8 +17,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from hframe_id.errors import OptionError
-from hframe_id.fitting.solvers import solver_names
+from hframe_id.errors import OptionError, shown
+from hframe_id.fitting.solvers import check_solver_name
 
 #: Prior relative std of a table value held in a fit (``FitOptions.consider``): the spread
 #: between the thesis's own tables and between rigs is 10-20 % (Tables 2.1/2.3, 4.1/4.2).
@@ -27,6 +31,10 @@ CONTINUITY = ("exact", "none")
 #: node every 10 ms at 1 kHz) joined into one simulated trajectory.
 DEFAULT_SHOOTING_INTERVAL = 10
 DEFAULT_CONTINUITY = "exact"
+#: The settings ``FitOptions`` may leave to the model (None), which ``for_model`` resolves:
+#: those a model may declare ``fit_defaults`` for (``models.declaration.FIT_DEFAULT_KEYS``,
+#: not imported here because that module imports CasADi; a test keeps the two equal).
+LEFT_TO_MODEL = ("shooting_interval", "continuity")
 INITIAL_STATES = ("auto", "rest", "estimate")
 CONSIDER_METHODS = ("linear", "refit", "prior")
 
@@ -46,61 +54,220 @@ class FitProgress:
 def _positive(name: str, value: Any, integer: bool = False) -> None:
     kind = int if integer else (int, float)
     if isinstance(value, bool) or not isinstance(value, kind):
-        raise OptionError(f"{name} must be a {'whole ' if integer else ''}number, got {value!r}")
+        raise OptionError(
+            f"{name} must be a {'whole ' if integer else ''}number, got {shown(value)}"
+        )
     if not (math.isfinite(value) and value > 0):
-        raise OptionError(f"{name} must be > 0, got {value!r}")
+        raise OptionError(f"{name} must be > 0, got {shown(value)}")
+
+
+def _one_of(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise OptionError(f"{name} must be one of {', '.join(choices)}, got {shown(value)}")
+
+
+def _names(name: str, value: Any) -> tuple[str, ...]:
+    """``value`` as a tuple of non-empty names (a single string is refused)."""
+    names = None if isinstance(value, str) else _as_tuple(value)
+    if names is None or not all(isinstance(v, str) and v for v in names):
+        raise OptionError(
+            f"{name} must be a sequence of parameter names or patterns, got {shown(value)}"
+        )
+    return names
+
+
+def _as_tuple(value: Any) -> tuple | None:
+    """``value``'s items as a tuple, None if it has none (a number)."""
+    try:
+        return tuple(value)
+    except TypeError:
+        return None
+
+
+def _check_consider(consider: Any, consider_method: Any) -> None:
+    """``consider``: None or a mapping of names to relative stds > 0 [1];
+    ``consider_method`` one of ``CONSIDER_METHODS``. Read by the problem (``"prior"``: the
+    held parameters' priors enter the cost) and by the statistics (the consider covariance)."""
+    if consider is not None:
+        if not isinstance(consider, Mapping):
+            raise OptionError(
+                f"consider must map parameter names to relative std, got {shown(consider)}"
+            )
+        for name, value in consider.items():
+            _positive(f"consider[{shown(name)}]", value)
+    _one_of("consider_method", consider_method, CONSIDER_METHODS)
+
+
+def _default_threads() -> int:
+    return max(1, min(os.cpu_count() or 1, 8))
 
 
 @dataclass(frozen=True)
 class ProblemOptions:
     """What is estimated, from what: the parts of ``FitOptions`` that ``build_problem`` reads
     (free set, bounds, channel weights and latencies, Coulomb smoothing, and the held
-    parameters' priors where they enter the cost)."""
+    parameters' priors where they enter the cost).
 
-    free: tuple[str, ...] | None
-    fix: tuple[str, ...]
-    bounds: Mapping[str, tuple[float, float]]
-    bound_factor: float
-    channel_std: Mapping[str, float]
-    latency_samples: Mapping[str, int]
-    smoothing: tuple[float, float] | None
-    consider: Mapping[str, float] | None
-    consider_method: str
-    initial_state: str
-    zero_reachable: tuple[str, ...]
+    The fields mean what ``FitOptions``' of the same name do, with the same defaults; each is
+    checked on construction (the names of parameters and outputs against the model only when
+    the problem is built), the sequences stored as tuples."""
+
+    free: tuple[str, ...] | None = None
+    fix: tuple[str, ...] = ()
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    bound_factor: float = 10.0
+    channel_std: Mapping[str, float] = field(default_factory=dict)
+    latency_samples: Mapping[str, int] = field(default_factory=dict)
+    smoothing: tuple[float, float] | None = None
+    consider: Mapping[str, float] | None = None
+    consider_method: str = "linear"
+    initial_state: str = "auto"
+    zero_reachable: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        self._check_names()
+        self._check_bounds()
+        self._check_channels()
+        self._check_smoothing()
+        _check_consider(self.consider, self.consider_method)
+        _one_of("initial_state", self.initial_state, INITIAL_STATES)
+
+    def _check_names(self) -> None:
+        """``free`` (None: the model's default set, else not empty), ``fix`` and
+        ``zero_reachable``: sequences of non-empty names, stored as tuples."""
+        if self.free is not None:
+            object.__setattr__(self, "free", _names("free", self.free))
+            if not self.free:
+                raise OptionError("free must name at least one parameter (or be None for defaults)")
+        object.__setattr__(self, "fix", _names("fix", self.fix))
+        object.__setattr__(self, "zero_reachable", _names("zero_reachable", self.zero_reachable))
+
+    def _check_bounds(self) -> None:
+        """``bounds``: a mapping of names to two numbers, low < high [SI]; ``bound_factor``
+        a number > 1."""
+        if not isinstance(self.bounds, Mapping):
+            raise OptionError(f"bounds must map names to (low, high), got {shown(self.bounds)}")
+        for name, pair in self.bounds.items():
+            if not (isinstance(pair, tuple | list) and len(pair) == 2):
+                raise OptionError(f"bounds[{shown(name)}] must be (low, high), got {shown(pair)}")
+            low, high = pair
+            for v in (low, high):
+                if isinstance(v, bool) or not isinstance(v, int | float) or math.isnan(v):
+                    raise OptionError(
+                        f"bounds[{shown(name)}] must be two numbers, got {shown(pair)}"
+                    )
+            if not low < high:
+                raise OptionError(
+                    f"bounds[{shown(name)}] must satisfy low < high, got {shown(pair)}"
+                )
+        _positive("bound_factor", self.bound_factor)
+        if self.bound_factor <= 1:
+            raise OptionError(f"bound_factor must be > 1, got {shown(self.bound_factor)}")
+
+    def _check_channels(self) -> None:
+        """``channel_std``: output names to noise stds > 0 [rad or m]; ``latency_samples``:
+        output names to whole numbers in 0..100 [samples]."""
+        if not isinstance(self.channel_std, Mapping):
+            raise OptionError(
+                f"channel_std must map output names to numbers, got {shown(self.channel_std)}"
+            )
+        for name, value in self.channel_std.items():
+            _positive(f"channel_std[{shown(name)}]", value)
+        if not isinstance(self.latency_samples, Mapping):
+            raise OptionError(
+                "latency_samples must map output names to samples, "
+                f"got {shown(self.latency_samples)}"
+            )
+        for name, value in self.latency_samples.items():
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
+                raise OptionError(
+                    f"latency_samples[{shown(name)}] must be a whole number of samples in 0..100, "
+                    f"got {shown(value)}"
+                )
+
+    def _check_smoothing(self) -> None:
+        """``smoothing``: None or two velocities > 0 [m/s, rad/s], stored as floats."""
+        if self.smoothing is None:
+            return
+        pair = None if isinstance(self.smoothing, str) else _as_tuple(self.smoothing)
+        if pair is None or len(pair) != 2:
+            raise OptionError(
+                f"smoothing must be (linear m/s, angular rad/s), got {shown(self.smoothing)}"
+            )
+        for value in pair:
+            _positive("smoothing", value)
+        object.__setattr__(self, "smoothing", tuple(float(v) for v in pair))
 
 
 @dataclass(frozen=True)
 class TranscriptionOptions:
     """How the problem is cut into shooting windows and integrated: the parts of
-    ``FitOptions`` that ``MultipleShooting`` reads."""
+    ``FitOptions`` that ``MultipleShooting`` reads, each checked on construction. The fields
+    mean what ``FitOptions``' do; the defaults are the library's for a model that declares
+    no ``fit_defaults`` (``FitOptions.for_model`` applies a model's)."""
 
-    shooting_interval: int
-    continuity: str
-    substep_safety: float
-    max_substeps: int
-    threads: int
+    shooting_interval: int = DEFAULT_SHOOTING_INTERVAL
+    continuity: str = DEFAULT_CONTINUITY
+    substep_safety: float = 1.5
+    max_substeps: int = 200
+    threads: int = field(default_factory=_default_threads)
+
+    def __post_init__(self) -> None:
+        if (
+            isinstance(self.shooting_interval, bool)
+            or not isinstance(self.shooting_interval, int)
+            or self.shooting_interval < 1
+        ):
+            raise OptionError(
+                f"shooting interval must be >= 1 sample, got {shown(self.shooting_interval)}"
+            )
+        _one_of("continuity", self.continuity, CONTINUITY)
+        _positive("substep_safety", self.substep_safety)
+        if self.substep_safety < 1:
+            raise OptionError(f"substep_safety must be >= 1, got {shown(self.substep_safety)}")
+        _positive("max_substeps", self.max_substeps, integer=True)
+        _positive("threads", self.threads, integer=True)
 
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """How the all-window stages are solved: which solver, iterations and tolerances."""
+    """How the all-window stages are solved: which solver (a name ``fitting.solvers``
+    knows, built in or registered), iterations and tolerances (finite, > 0), each checked on
+    construction. The fields mean what ``FitOptions``' do, with the same defaults."""
 
-    solver: str
-    max_iterations: int
-    step_tol: float
-    defect_tol: float
+    solver: str = "gauss-newton"
+    max_iterations: int = 150
+    step_tol: float = 1e-6
+    defect_tol: float = 1e-2
+
+    def __post_init__(self) -> None:
+        check_solver_name(self.solver)
+        _positive("max_iterations", self.max_iterations, integer=True)
+        _positive("step_tol", self.step_tol)
+        _positive("defect_tol", self.defect_tol)
 
 
 @dataclass(frozen=True)
 class StatisticsOptions:
-    """How the intervals are computed and judged."""
+    """How the intervals are computed and judged, each field checked on construction. The
+    fields mean what ``FitOptions``' do, with the same defaults."""
 
-    uncertainty: str
-    confidence: float
-    consider: Mapping[str, float] | None
-    consider_method: str
-    identifiability_threshold: float
+    uncertainty: str = "robust"
+    confidence: float = 0.95
+    consider: Mapping[str, float] | None = None
+    consider_method: str = "linear"
+    identifiability_threshold: float = 0.1
+
+    def __post_init__(self) -> None:
+        _one_of("uncertainty", self.uncertainty, UNCERTAINTY_METHODS)
+        if not (isinstance(self.confidence, float) and 0 < self.confidence < 1):
+            raise OptionError(f"confidence must be in (0, 1), got {shown(self.confidence)}")
+        _check_consider(self.consider, self.consider_method)
+        _positive("identifiability_threshold", self.identifiability_threshold)
+
+
+#: The links of the chain, each handed its part of ``FitOptions``.
+LINK_OPTIONS = (ProblemOptions, TranscriptionOptions, SolverOptions, StatisticsOptions)
 
 
 def _part(options: Any, kind: type) -> Any:
@@ -110,12 +277,13 @@ def _part(options: Any, kind: type) -> Any:
 
 @dataclass(frozen=True)
 class FitOptions:
-    """How to fit: one flat set of options for users, validated together.
+    """How to fit: one flat set of options for users, validated on construction.
 
     The parts each component reads are its own frozen options (``problem_options``,
     ``transcription_options``, ``solver_options``, ``statistics_options``): the problem
-    builder, the transcription, the solvers and the statistics see only theirs; the rest
-    (noise weighting, first stages, pre-pass, misfit limit, progress) is the fit's strategy.
+    builder, the transcription, the solvers and the statistics see only theirs, and each
+    part checks its fields (``FitOptions`` builds them to check its own); the rest (noise
+    weighting, first stages, pre-pass, misfit limit, progress) is the fit's strategy.
 
     Attributes
     ----------
@@ -241,30 +409,30 @@ class FitOptions:
     free: tuple[str, ...] | None = None
     fix: tuple[str, ...] = ()
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    bound_factor: float = 10.0
+    bound_factor: float = ProblemOptions.bound_factor
     channel_std: Mapping[str, float] = field(default_factory=dict)
-    solver: str = "gauss-newton"
+    solver: str = SolverOptions.solver
     noise: str = "auto"
     latency_samples: Mapping[str, int] = field(default_factory=dict)
     consider: Mapping[str, float] | None = None
-    consider_method: str = "linear"
+    consider_method: str = ProblemOptions.consider_method
     shooting_interval: int | None = None
     continuity: str | None = None
-    initial_state: str = "auto"
+    initial_state: str = ProblemOptions.initial_state
     smoothing: tuple[float, float] | None = None
     smoothing_schedule: tuple[float, ...] = (1.0,)
     first_stage: bool = True
     state_prepass: bool = True
-    max_iterations: int = 150
-    step_tol: float = 1e-6
-    defect_tol: float = 1e-2
-    identifiability_threshold: float = 0.1
+    max_iterations: int = SolverOptions.max_iterations
+    step_tol: float = SolverOptions.step_tol
+    defect_tol: float = SolverOptions.defect_tol
+    identifiability_threshold: float = StatisticsOptions.identifiability_threshold
     max_misfit: float | None = None
-    uncertainty: str = "robust"
-    confidence: float = 0.95
-    substep_safety: float = 1.5
-    max_substeps: int = 200
-    threads: int = field(default_factory=lambda: max(1, min(os.cpu_count() or 1, 8)))
+    uncertainty: str = StatisticsOptions.uncertainty
+    confidence: float = StatisticsOptions.confidence
+    substep_safety: float = TranscriptionOptions.substep_safety
+    max_substeps: int = TranscriptionOptions.max_substeps
+    threads: int = field(default_factory=_default_threads)
     verbose: int = 0
     progress: Callable[[FitProgress], None] | None = None
     known_points: tuple[Any, ...] = ()  # ParameterSet objects
@@ -273,193 +441,67 @@ class FitOptions:
     start_seed: int = 0
 
     def __post_init__(self) -> None:
-        self._check_free_and_fix()
-        self._check_bounds()
-        self._check_channel_std()
-        self._check_shooting_interval()
-        self._check_smoothing()
-        self._check_solver_limits()
-        self._check_latency_samples()
-        self._check_consider()
-        self._check_method_names()
-        self._check_run_settings()
+        self._check_links()
+        self._check_smoothing_schedule()
+        self._check_strategy()
         self._check_known_points()
 
-    def _check_free_and_fix(self) -> None:
-        """``free`` and ``fix``: sequences of non-empty names, stored as tuples; ``free``
-        None (the default set) or not empty."""
-        for name in ("free", "fix"):
-            value = getattr(self, name)
-            if value is None and name == "free":
-                continue
-            if isinstance(value, str) or not all(isinstance(v, str) and v for v in value):
-                raise OptionError(
-                    f"{name} must be a sequence of parameter names or patterns, got {value!r}"
-                )
-            object.__setattr__(self, name, tuple(value))
-        if self.free is not None and not self.free:
-            raise OptionError("free must name at least one parameter (or be None for defaults)")
+    def _check_links(self) -> None:
+        """Every field a link of the chain reads, checked by that link's options (each rule
+        lives in the class that owns the field): the part of each link is built from the
+        fields given here, and the values it normalises (sequences as tuples, smoothing as
+        floats) are kept. A setting left to the model (None, ``LEFT_TO_MODEL``) is checked
+        when ``for_model`` resolves it."""
+        for kind in LINK_OPTIONS:
+            given = {
+                f.name: getattr(self, f.name)
+                for f in fields(kind)
+                if not (f.name in LEFT_TO_MODEL and getattr(self, f.name) is None)
+            }
+            part = kind(**given)
+            for name in given:
+                object.__setattr__(self, name, getattr(part, name))
 
-    def _check_bounds(self) -> None:
-        """``bounds``: a mapping of names to two numbers, low < high [SI]; ``bound_factor``
-        a number > 1."""
-        if not isinstance(self.bounds, Mapping):
-            raise OptionError(f"bounds must map names to (low, high), got {self.bounds!r}")
-        for name, pair in self.bounds.items():
-            if not (isinstance(pair, tuple | list) and len(pair) == 2):
-                raise OptionError(f"bounds[{name!r}] must be (low, high), got {pair!r}")
-            low, high = pair
-            for v in (low, high):
-                if isinstance(v, bool) or not isinstance(v, int | float) or math.isnan(v):
-                    raise OptionError(f"bounds[{name!r}] must be two numbers, got {pair!r}")
-            if not low < high:
-                raise OptionError(f"bounds[{name!r}] must satisfy low < high, got {pair!r}")
-        _positive("bound_factor", self.bound_factor)
-        if self.bound_factor <= 1:
-            raise OptionError(f"bound_factor must be > 1, got {self.bound_factor!r}")
-
-    def _check_channel_std(self) -> None:
-        """``channel_std``: a mapping of output names to noise stds > 0 [rad or m]."""
-        if not isinstance(self.channel_std, Mapping):
-            raise OptionError(
-                f"channel_std must map output names to numbers, got {self.channel_std!r}"
-            )
-        for name, value in self.channel_std.items():
-            _positive(f"channel_std[{name!r}]", value)
-
-    def _check_shooting_interval(self) -> None:
-        """``shooting_interval``: None (the model's default) or a whole number >= 1 [samples]."""
-        if self.shooting_interval is not None and (
-            isinstance(self.shooting_interval, bool)
-            or not isinstance(self.shooting_interval, int)
-            or self.shooting_interval < 1
-        ):
-            raise OptionError(
-                f"shooting interval must be >= 1 sample, got {self.shooting_interval!r}"
-            )
-
-    def _check_smoothing(self) -> None:
-        """``smoothing``: None or two velocities > 0 [m/s, rad/s]; ``smoothing_schedule``:
-        factors > 0, not increasing, ending with 1. Both stored as tuples of floats."""
-        if self.smoothing is not None:
-            if len(self.smoothing) != 2:
-                raise OptionError(
-                    f"smoothing must be (linear m/s, angular rad/s), got {self.smoothing!r}"
-                )
-            for value in self.smoothing:
-                _positive("smoothing", value)
-            object.__setattr__(self, "smoothing", tuple(float(v) for v in self.smoothing))
+    def _check_smoothing_schedule(self) -> None:
+        """``smoothing_schedule``: factors > 0, not increasing, ending with 1; stored as a
+        tuple of floats."""
         schedule = tuple(self.smoothing_schedule)
         if not schedule:
             raise OptionError("smoothing_schedule needs at least one factor (1.0)")
         for value in schedule:
             _positive("smoothing_schedule factor", value)
         if any(b > a for a, b in zip(schedule, schedule[1:], strict=False)):
-            raise OptionError(f"smoothing_schedule must not increase, got {schedule!r}")
+            raise OptionError(f"smoothing_schedule must not increase, got {shown(schedule)}")
         if schedule[-1] != 1:
             raise OptionError(
-                f"smoothing_schedule must end with 1 (the final smoothing), got {schedule!r}"
+                f"smoothing_schedule must end with 1 (the final smoothing), got {shown(schedule)}"
             )
         object.__setattr__(self, "smoothing_schedule", tuple(float(v) for v in schedule))
 
-    def _check_solver_limits(self) -> None:
-        """Iteration and substep limits (whole numbers > 0), tolerances and thresholds
-        (> 0), ``max_misfit`` (None or > 0 [noise stds]), ``substep_safety`` >= 1."""
-        _positive("max_iterations", self.max_iterations, integer=True)
-        for name in (
-            "step_tol",
-            "defect_tol",
-            "identifiability_threshold",
-            "substep_safety",
-        ):
-            _positive(name, getattr(self, name))
+    def _check_strategy(self) -> None:
+        """The strategy's own settings: ``noise`` one of ``NOISE_METHODS``, ``max_misfit``
+        None or > 0 [noise stds], ``starts`` a whole number > 0, ``start_seed`` an integer
+        >= 0, ``verbose`` 0, 1 or 2, ``progress`` None or callable."""
+        _one_of("noise", self.noise, NOISE_METHODS)
         if self.max_misfit is not None:
             _positive("max_misfit", self.max_misfit)
-        if self.substep_safety < 1:
-            raise OptionError(f"substep_safety must be >= 1, got {self.substep_safety!r}")
-        _positive("max_substeps", self.max_substeps, integer=True)
-
-    def _check_latency_samples(self) -> None:
-        """``latency_samples``: a mapping of output names to whole numbers in 0..100
-        [samples]."""
-        if not isinstance(self.latency_samples, Mapping):
-            raise OptionError(
-                f"latency_samples must map output names to samples, got {self.latency_samples!r}"
-            )
-        for name, value in self.latency_samples.items():
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
-                raise OptionError(
-                    f"latency_samples[{name!r}] must be a whole number of samples in 0..100, "
-                    f"got {value!r}"
-                )
-
-    def _check_consider(self) -> None:
-        """``consider``: None or a mapping of names to relative stds > 0 [1];
-        ``consider_method`` one of ``CONSIDER_METHODS``."""
-        if self.consider is not None:
-            if not isinstance(self.consider, Mapping):
-                raise OptionError(
-                    f"consider must map parameter names to relative std, got {self.consider!r}"
-                )
-            for name, value in self.consider.items():
-                _positive(f"consider[{name!r}]", value)
-        if self.consider_method not in CONSIDER_METHODS:
-            raise OptionError(
-                f"consider_method must be one of {', '.join(CONSIDER_METHODS)}, "
-                f"got {self.consider_method!r}"
-            )
-
-    def _check_method_names(self) -> None:
-        """The options chosen by name (solver, initial state, continuity, noise,
-        uncertainty) are known ones; ``confidence`` a float in (0, 1)."""
-        if self.solver not in solver_names():
-            raise OptionError(
-                f"solver must be one of {', '.join(solver_names())}, got {self.solver!r}"
-            )
-        if self.initial_state not in INITIAL_STATES:
-            raise OptionError(
-                f"initial_state must be one of {', '.join(INITIAL_STATES)}, "
-                f"got {self.initial_state!r}"
-            )
-        if self.continuity is not None and self.continuity not in CONTINUITY:
-            raise OptionError(
-                f"continuity must be one of {', '.join(CONTINUITY)}, got {self.continuity!r}"
-            )
-        if self.noise not in NOISE_METHODS:
-            raise OptionError(
-                f"noise must be one of {', '.join(NOISE_METHODS)}, got {self.noise!r}"
-            )
-        if self.uncertainty not in UNCERTAINTY_METHODS:
-            raise OptionError(
-                f"uncertainty must be one of {', '.join(UNCERTAINTY_METHODS)}, "
-                f"got {self.uncertainty!r}"
-            )
-        if not (isinstance(self.confidence, float) and 0 < self.confidence < 1):
-            raise OptionError(f"confidence must be in (0, 1), got {self.confidence!r}")
-
-    def _check_run_settings(self) -> None:
-        """``threads`` and ``starts`` whole numbers > 0, ``start_seed`` an integer >= 0,
-        ``verbose`` 0, 1 or 2, ``progress`` None or callable."""
-        _positive("threads", self.threads, integer=True)
         _positive("starts", self.starts, integer=True)
         if (
             isinstance(self.start_seed, bool)
             or not isinstance(self.start_seed, int)
             or (self.start_seed < 0)
         ):
-            raise OptionError(f"start_seed must be an integer >= 0, got {self.start_seed!r}")
+            raise OptionError(f"start_seed must be an integer >= 0, got {shown(self.start_seed)}")
         if self.verbose not in (0, 1, 2):
-            raise OptionError(f"verbose must be 0, 1 or 2, got {self.verbose!r}")
+            raise OptionError(f"verbose must be 0, 1 or 2, got {shown(self.verbose)}")
         if self.progress is not None and not callable(self.progress):
             raise OptionError("progress must be callable (FitProgress) -> None")
 
     def _check_known_points(self) -> None:
-        """``known_points`` (``ParameterSet`` objects) and ``zero_reachable``, stored as
-        tuples."""
+        """``known_points``: ``ParameterSet`` objects, stored as a tuple."""
         from hframe_id.parameters import ParameterSet
 
         object.__setattr__(self, "known_points", tuple(self.known_points))
-        object.__setattr__(self, "zero_reachable", tuple(self.zero_reachable))
         for params in self.known_points:
             if not isinstance(params, ParameterSet):
                 raise OptionError(
@@ -494,7 +536,14 @@ class FitOptions:
     @property
     def transcription_options(self) -> TranscriptionOptions:
         """The multiple-shooting transcription's part: shooting interval, continuity,
-        substeps, threads."""
+        substeps, threads. Only of options whose transcription is resolved (``for_model``):
+        the model's declared ``fit_defaults`` are not the library's."""
+        unset = [k for k in LEFT_TO_MODEL if getattr(self, k) is None]
+        if unset:
+            raise OptionError(
+                f"{' and '.join(unset)} left to the model: take the transcription_options "
+                "of for_model(variant)"
+            )
         return _part(self, TranscriptionOptions)
 
     @property

@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
-from hframe_id.errors import OptionError
+from hframe_id.errors import OptionError, shown
 
 if TYPE_CHECKING:
     from hframe_id.fitting.options import SolverOptions
@@ -129,11 +129,18 @@ def solver_names() -> tuple[str, ...]:
     return (*BUILT_IN, *_REGISTERED)
 
 
+def check_solver_name(name: object) -> None:
+    """Raise OptionError unless ``name`` is one of ``solver_names()`` (``SolverOptions``
+    checks its solver with it; a solver may be unregistered after that, so ``solver_named``
+    checks again)."""
+    if name not in solver_names():
+        raise OptionError(f"solver must be one of {', '.join(solver_names())}, got {shown(name)}")
+
+
 def solver_named(name: str) -> Solver:
     """The solver registered as ``name``."""
+    check_solver_name(name)
     if name in _REGISTERED:
         return _REGISTERED[name]
-    if name not in BUILT_IN:
-        raise OptionError(f"solver must be one of {', '.join(solver_names())}, got {name!r}")
     module, attribute = BUILT_IN[name].split(":")
     return getattr(importlib.import_module(module), attribute)

@@ -1,42 +1,185 @@
-"""FitOptions (``fitting.options``): every field validated with a message a user can act on,
-the defaults, the frozen parts each component reads and the model's fit defaults."""
+"""Options (``fitting.options``): each link's options check their own fields with a message a
+user can act on, FitOptions through them and its own, the defaults, the frozen parts each
+component reads and the model's fit defaults."""
 
 import dataclasses
+import math
 from pathlib import Path
 
 import pytest
 
 from hframe_id.errors import OptionError
-from hframe_id.fitting import FitOptions
+from hframe_id.fitting import FitOptions, solvers
+from hframe_id.fitting.options import (
+    ProblemOptions,
+    SolverOptions,
+    StatisticsOptions,
+    TranscriptionOptions,
+)
+
+#: (link, field, bad value, the one-line message): each rule of a field the link owns.
+BAD_LINK_FIELDS = [
+    (ProblemOptions, "free", "k_l", "free must be a sequence of parameter names or patterns"),
+    (ProblemOptions, "free", 3, "free must be a sequence of parameter names or patterns, got 3"),
+    (ProblemOptions, "free", (), "free must name at least one parameter"),
+    (ProblemOptions, "fix", ("k_l", ""), "fix must be a sequence of parameter names"),
+    (ProblemOptions, "zero_reachable", "B_1", "zero_reachable must be a sequence of parameter"),
+    (ProblemOptions, "bounds", [1, 2], "bounds must map names to (low, high), got [1, 2]"),
+    (ProblemOptions, "bounds", None, "bounds must map names to (low, high), got None"),
+    (ProblemOptions, "bounds", {"k_l": 1.0}, "bounds['k_l'] must be (low, high), got 1.0"),
+    (ProblemOptions, "bounds", {"k_l": (1.0, math.nan)}, "bounds['k_l'] must be two numbers"),
+    (ProblemOptions, "bounds", {"k_l": (2.0, 1.0)}, "bounds['k_l'] must satisfy low < high"),
+    (ProblemOptions, "bound_factor", 1.0, "bound_factor must be > 1, got 1.0"),
+    (ProblemOptions, "bound_factor", "10", "bound_factor must be a number, got '10'"),
+    (ProblemOptions, "channel_std", 0.1, "channel_std must map output names to numbers"),
+    (ProblemOptions, "channel_std", {"phi1": -1.0}, "channel_std['phi1'] must be > 0, got -1.0"),
+    (ProblemOptions, "latency_samples", 2, "latency_samples must map output names to samples"),
+    (
+        ProblemOptions,
+        "latency_samples",
+        {"x": 101},
+        "latency_samples['x'] must be a whole number of samples in 0..100, got 101",
+    ),
+    (ProblemOptions, "smoothing", (1e-3,), "smoothing must be (linear m/s, angular rad/s)"),
+    (ProblemOptions, "smoothing", (1e-3, 0.0), "smoothing must be > 0, got 0.0"),
+    (ProblemOptions, "consider", [1], "consider must map parameter names to relative std"),
+    (ProblemOptions, "consider", {"J_2": -0.2}, "consider['J_2'] must be > 0, got -0.2"),
+    (
+        ProblemOptions,
+        "consider_method",
+        "exact",
+        "consider_method must be one of linear, refit, prior, got 'exact'",
+    ),
+    (
+        ProblemOptions,
+        "initial_state",
+        "zero",
+        "initial_state must be one of auto, rest, estimate, got 'zero'",
+    ),
+    (TranscriptionOptions, "shooting_interval", 0, "shooting interval must be >= 1 sample, got 0"),
+    (TranscriptionOptions, "shooting_interval", 2.5, "shooting interval must be >= 1 sample"),
+    (
+        TranscriptionOptions,
+        "continuity",
+        "loose",
+        "continuity must be one of exact, none, got 'loose'",
+    ),
+    (TranscriptionOptions, "substep_safety", 0.5, "substep_safety must be >= 1, got 0.5"),
+    (TranscriptionOptions, "substep_safety", math.inf, "substep_safety must be > 0, got inf"),
+    (TranscriptionOptions, "max_substeps", 0, "max_substeps must be > 0, got 0"),
+    (TranscriptionOptions, "threads", 1.5, "threads must be a whole number, got 1.5"),
+    (SolverOptions, "solver", "newton", "solver must be one of gauss-newton, ipopt, sqpmethod"),
+    (SolverOptions, "max_iterations", 0, "max_iterations must be > 0, got 0"),
+    (SolverOptions, "max_iterations", None, "max_iterations must be a whole number, got None"),
+    (SolverOptions, "max_iterations", True, "max_iterations must be a whole number, got True"),
+    (SolverOptions, "step_tol", math.nan, "step_tol must be > 0, got nan"),
+    (SolverOptions, "defect_tol", math.inf, "defect_tol must be > 0, got inf"),
+    (SolverOptions, "defect_tol", "1e-2", "defect_tol must be a number, got '1e-2'"),
+    (StatisticsOptions, "uncertainty", "bayes", "uncertainty must be one of robust, noise-model"),
+    (StatisticsOptions, "confidence", 95, "confidence must be in (0, 1), got 95"),
+    (StatisticsOptions, "identifiability_threshold", 0.0, "identifiability_threshold must be > 0"),
+    (StatisticsOptions, "consider", {"J_2": 0}, "consider['J_2'] must be > 0, got 0"),
+    (StatisticsOptions, "consider_method", "exact", "consider_method must be one of linear"),
+]
+
+
+def _link_case_id(case) -> str:
+    return f"{case[0].__name__}.{case[1]}={case[2]!r}"
+
+
+@pytest.mark.parametrize(
+    ("link", "name", "value", "message"), BAD_LINK_FIELDS, ids=map(_link_case_id, BAD_LINK_FIELDS)
+)
+def test_each_link_refuses_a_bad_field_of_its_own_in_one_line(link, name, value, message):
+    """A link used on its own (a test, an example, a registered solver's caller) is checked."""
+    with pytest.raises(OptionError) as err:
+        link(**{name: value})
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("link", "name", "value", "message"), BAD_LINK_FIELDS, ids=map(_link_case_id, BAD_LINK_FIELDS)
+)
+def test_fit_options_refuse_each_bad_field_of_a_link_with_the_links_message(
+    link, name, value, message
+):
+    with pytest.raises(OptionError) as err:
+        FitOptions(**{name: value})
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_each_links_defaults_are_the_libraries():
+    """A link built with no arguments is valid and is the part ``FitOptions()`` hands it for a
+    model that declares no fit defaults (one set of defaults, not two that can drift)."""
+    options = FitOptions().for_model("hframe-8")
+    assert ProblemOptions() == options.problem_options
+    assert TranscriptionOptions() == options.transcription_options
+    assert SolverOptions() == options.solver_options
+    assert StatisticsOptions() == options.statistics_options
+
+
+def test_the_settings_left_to_the_model_are_those_a_model_declares():
+    from hframe_id.fitting.options import LEFT_TO_MODEL
+    from hframe_id.models.declaration import FIT_DEFAULT_KEYS
+
+    assert LEFT_TO_MODEL == FIT_DEFAULT_KEYS
+
+
+def test_a_link_stores_its_sequences_normalised_and_fit_options_keep_them():
+    given = dict(free=["k_l", "k_*"], fix=iter(["B_1"]), smoothing=[1, 2], zero_reachable=["b"])
+    part = ProblemOptions(**given)
+    assert (part.free, part.fix, part.zero_reachable) == (("k_l", "k_*"), ("B_1",), ("b",))
+    assert part.smoothing == (1.0, 2.0) and isinstance(part.smoothing[0], float)
+    options = FitOptions(**{**given, "fix": ["B_1"]})
+    assert (options.free, options.fix, options.smoothing) == (("k_l", "k_*"), ("B_1",), (1, 2))
+    assert options.problem_options == part
+
+
+def test_a_registered_solver_is_a_known_name(monkeypatch):
+    """The solver's name is checked against the registry as it is, not a fixed list."""
+    with pytest.raises(OptionError, match="got 'mine'"):
+        SolverOptions("mine")
+    monkeypatch.setitem(solvers._REGISTERED, "mine", object())
+    assert SolverOptions("mine").solver == "mine"
+
+
+def test_the_transcription_left_to_the_model_is_not_handed_out_unresolved():
+    """Unresolved, the transcription would silently be the library's, not the model's."""
+    with pytest.raises(OptionError, match="shooting_interval and continuity left to the model"):
+        _ = FitOptions().transcription_options
+    with pytest.raises(OptionError, match="^continuity left to the model"):
+        _ = FitOptions(shooting_interval=5).transcription_options
+
+
+def test_a_long_value_is_echoed_shortened():
+    with pytest.raises(OptionError) as err:
+        SolverOptions(solver="x" * 10_000)
+    assert len(str(err.value)) < 200
 
 
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"shooting_interval": 0}, "shooting interval must be >= 1 sample, got 0"),
-        ({"free": "k_l"}, "sequence of parameter names"),
-        ({"free": ()}, "at least one"),
-        ({"bounds": {"k_l": (2.0, 1.0)}}, "low < high"),
-        ({"bound_factor": 1.0}, "bound_factor must be > 1"),
-        ({"smoothing_schedule": (1.0, 10.0)}, "must not increase"),
+        ({"smoothing_schedule": (1.0, 10.0)}, "smoothing_schedule must not increase"),
         ({"smoothing_schedule": (10.0, 2.0)}, "must end with 1"),
-        ({"uncertainty": "bayes"}, "uncertainty must be one of"),
-        ({"confidence": 95}, "confidence must be in (0, 1)"),
-        ({"channel_std": {"phi1": -1.0}}, "channel_std['phi1'] must be > 0"),
-        ({"max_iterations": 0}, "max_iterations must be > 0"),
-        ({"consider_method": "exact"}, "consider_method must be one of linear, refit"),
+        ({"smoothing_schedule": ()}, "smoothing_schedule needs at least one factor"),
+        ({"noise": "guess"}, "noise must be one of auto, sensor, estimate, got 'guess'"),
+        ({"max_misfit": 0.0}, "max_misfit must be > 0, got 0.0"),
+        ({"starts": 0}, "starts must be > 0, got 0"),
+        ({"start_seed": -1}, "start_seed must be an integer >= 0, got -1"),
+        ({"verbose": 3}, "verbose must be 0, 1 or 2, got 3"),
+        ({"progress": "stderr"}, "progress must be callable"),
+        ({"known_points": ("table.yaml",)}, "known_points must be ParameterSet objects, got str"),
     ],
 )
-def test_options_validate_with_actionable_messages(kwargs, message):
-    with pytest.raises(OptionError, match=None) as err:
+def test_the_strategys_own_settings_are_checked_in_one_line(kwargs, message):
+    with pytest.raises(OptionError) as err:
         FitOptions(**kwargs)
-    assert message in str(err.value)
+    assert message in str(err.value) and "\n" not in str(err.value)
 
 
 def test_each_component_reads_its_own_options():
     """The transcription and the problem builder get frozen parts of the flat FitOptions."""
-    from hframe_id.fitting.options import ProblemOptions, TranscriptionOptions
-
     options = FitOptions(shooting_interval=25, continuity="none", bound_factor=3.0, threads=1)
     assert options.transcription_options == TranscriptionOptions(25, "none", 1.5, 200, 1)
     assert isinstance(options.problem_options, ProblemOptions)
@@ -61,41 +204,6 @@ def test_the_library_applies_the_models_fit_defaults():
         DEFAULT_SHOOTING_INTERVAL,
         DEFAULT_CONTINUITY,
     )
-
-
-@pytest.mark.parametrize(
-    ("field", "value"), [("noise", "guess"), ("consider", {"J_2": -0.2}), ("consider", [1])]
-)
-def test_bad_noise_and_consider_options_are_one_line_errors(field, value):
-    with pytest.raises(OptionError, match=field):
-        FitOptions(**{field: value})
-
-
-def test_starts_must_be_a_positive_whole_number():
-    with pytest.raises(OptionError, match="starts"):
-        FitOptions(starts=0)
-    with pytest.raises(OptionError, match="start_seed"):
-        FitOptions(start_seed=-1)
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "message"),
-    [
-        ({"continuity": "loose"}, "continuity must be one of exact, none, got 'loose'"),
-        ({"initial_state": "zero"}, "initial_state must be one of auto, rest, estimate"),
-        ({"latency_samples": {"x": 101}}, "latency_samples['x'] must be a whole number"),
-        ({"substep_safety": 0.5}, "substep_safety must be >= 1, got 0.5"),
-        ({"max_misfit": 0.0}, "max_misfit must be > 0, got 0.0"),
-        ({"threads": 1.5}, "threads must be a whole number, got 1.5"),
-        ({"verbose": 3}, "verbose must be 0, 1 or 2, got 3"),
-        ({"progress": "stderr"}, "progress must be callable"),
-        ({"known_points": ("table.yaml",)}, "known_points must be ParameterSet objects, got str"),
-    ],
-)
-def test_the_settings_chosen_by_name_or_number_are_checked_in_one_line(kwargs, message):
-    with pytest.raises(OptionError) as err:
-        FitOptions(**kwargs)
-    assert message in str(err.value) and "\n" not in str(err.value)
 
 
 def test_the_defaults_leave_the_transcription_to_the_model_and_are_stored_normalised():
