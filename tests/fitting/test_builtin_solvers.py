@@ -4,7 +4,6 @@ Whole fits by every solver: integration/test_cross_method.py."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -54,11 +53,10 @@ def test_the_gauss_newton_solver_stops_at_the_options_iterations(exact_shooting)
 
 
 def test_the_gauss_newton_solver_converges_by_the_options_tolerances(exact_shooting):
-    """With a step tolerance of 0.5 and no defect tolerance, the first full step (2 % in
-    each parameter, inside the radius 0.5) is already converged."""
-    options = replace(
-        FitOptions().solver_options, max_iterations=1, step_tol=0.5, defect_tol=math.inf
-    )
+    """With a step tolerance of 0.5 and a defect tolerance of 1e12 noise stds (none in
+    effect; SolverOptions takes finite tolerances only), the first full step (2 % in each
+    parameter, inside the radius 0.5) is already converged."""
+    options = replace(FitOptions().solver_options, max_iterations=1, step_tol=0.5, defect_tol=1e12)
     report = GAUSS_NEWTON.solve(_stage(exact_shooting, OFF, options, radius=0.5))
     assert report.iterations == 1 and report.converged, report.message
 

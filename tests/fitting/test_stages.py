@@ -60,10 +60,14 @@ def test_the_exact_stage_is_solved_by_the_solver_the_options_name(exact_shooting
     assert stage.settings == {"radius": 0.25}
 
 
-def test_an_exact_stage_by_an_unknown_solver_is_refused(exact_shooting):
+def test_an_exact_stage_by_a_solver_no_longer_registered_is_refused(exact_shooting, monkeypatch):
+    """SolverOptions refuses an unknown name when made (test_options); a solver unregistered
+    after its options were made is refused when the stage asks for it."""
     _, ms, nodes = exact_shooting
     state = SolverState(nodes.copy(), np.zeros(3), np.ones(3, dtype=bool))
+    monkeypatch.setitem(solvers._REGISTERED, "newton-raphson", object())
     options = SolverOptions("newton-raphson", 5, 1e-6, 1e-2)
+    monkeypatch.delitem(solvers._REGISTERED, "newton-raphson")
     with pytest.raises(OptionError, match="got 'newton-raphson'"):
         exact_stage(GaussNewton(ms), state, "all windows", options)
 
