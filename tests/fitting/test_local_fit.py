@@ -1,6 +1,7 @@
 """One fit inside one box (``fitting.local_fit``): the rules between its stages, each on
-hand-made inputs. The misfit judgement, the identifiability holds and the coordinates no
-output measures; the stages themselves: test_stages.py; whole fits: integration/."""
+hand-made inputs. The misfit judgement, the identifiability holds (``fitting.holds``) and
+the coordinates no output measures (``fitting.unmeasured``); the stages themselves:
+test_stages.py; whole fits: integration/."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hframe_id.fitting import FitOptions, local_fit
+from hframe_id.fitting import FitOptions, holds, local_fit, unmeasured
+from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.parameters import load_parameter_file
@@ -71,7 +73,7 @@ def test_a_failed_fit_keeps_its_message_and_gets_its_misfit(small_result):
 
 
 def _holds(monkeypatch, rounds, prior=(0.0, 0.0, 0.0), converged=True, rms=1.0):
-    """``_hold_unidentified`` on free parameters a, b, c whose relative standard errors are
+    """``hold_unidentified`` on free parameters a, b, c whose relative standard errors are
     ``rounds[0]`` at the fit and ``rounds[k]`` (of the parameters still active) after the
     k-th solve again; returns (held, the active flags and theta of each solve again)."""
     stats = [
@@ -89,9 +91,7 @@ def _holds(monkeypatch, rounds, prior=(0.0, 0.0, 0.0), converged=True, rms=1.0):
         resolved.append((active.tolist(), theta.tolist()))
         return SimpleNamespace(active=active, theta=theta, evaluation=cost), None
 
-    monkeypatch.setattr(
-        local_fit, "_stats", lambda gn, state, problem, method: stats[len(resolved)]
-    )
+    monkeypatch.setattr(FitRun, "statistics", lambda run, gn, state: stats[len(resolved)])
     problem = SimpleNamespace(
         free=(0, 1, 2), free_names=("a", "b", "c"), prior_weight=np.array(prior)
     )
@@ -101,9 +101,8 @@ def _holds(monkeypatch, rounds, prior=(0.0, 0.0, 0.0), converged=True, rms=1.0):
     )
     stages = [SimpleNamespace(converged=converged)]
     options = FitOptions(identifiability_threshold=0.1)
-    _, _, _, held = local_fit._hold_unidentified(
-        problem, options, ms, state, None, stats[0], stages, resolve
-    )
+    run = FitRun(problem, options, ms, None, None, None, None, 0.0, stages)
+    held = holds.hold_unidentified(run, Fitted(state, None, stats[0]), resolve).held
     return held, resolved
 
 
@@ -161,9 +160,9 @@ def one_axis_shooting():
 def test_every_h_frame_coordinate_is_measured(shooting_setup):
     """hframe-8: encoders on both motors, lasers on x and y."""
     problem, ms, _, _ = shooting_setup
-    assert local_fit._measured_coordinates(ms).all()
-    assert not local_fit._unmeasured_coordinates(ms)
-    assert local_fit._springs_at_unmeasured_coordinates(problem, ms) == []
+    assert unmeasured.measured_coordinates(ms).all()
+    assert not unmeasured.unmeasured_coordinates(ms)
+    assert unmeasured.springs_at_unmeasured_coordinates(problem, ms) == []
 
 
 def test_the_one_axis_idler_is_unmeasured_and_held_by_k2_and_k3(one_axis_shooting):
@@ -172,8 +171,8 @@ def test_the_one_axis_idler_is_unmeasured_and_held_by_k2_and_k3(one_axis_shootin
     pull on it, k1 (motor-cart) does not."""
     problem, ms = one_axis_shooting
     names = [c.name for c in ms.model.coordinates]
-    measured = dict(zip(names, local_fit._measured_coordinates(ms).tolist(), strict=True))
+    measured = dict(zip(names, unmeasured.measured_coordinates(ms).tolist(), strict=True))
     assert measured == {"phi1": True, "x": True, "phi3": False}
-    assert local_fit._unmeasured_coordinates(ms)
-    springs = local_fit._springs_at_unmeasured_coordinates(problem, ms)
+    assert unmeasured.unmeasured_coordinates(ms)
+    springs = unmeasured.springs_at_unmeasured_coordinates(problem, ms)
     assert [problem.free_names[i] for i in springs] == ["k2", "k3"]
