@@ -19,10 +19,13 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import replace
 
 import numpy as np
 
+from hframe_id.errors import FitError
+from hframe_id.fitting.dataset import Dataset, check_excitation
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import (
@@ -39,6 +42,7 @@ from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 
@@ -77,6 +81,7 @@ def fit_recordings(
         valid samples).
     """
     options = (options or FitOptions()).for_model(initial.variant)
+    _check_excitation(recordings, initial.variant)
     start = time.perf_counter()
     if options.starts > 1:
         result = _portfolio(recordings, initial, options)
@@ -91,6 +96,24 @@ def fit_recordings(
         )
     result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
+
+
+def _check_excitation(recordings, variant: str) -> None:
+    """``FitError`` before any work if no recording excites the model (``dataset.
+    check_excitation``), a warning naming each one at rest among others that do. Records
+    whose channels are not the model's are left to the problem's own checks, which name
+    what does not match."""
+    model = build_model(variant)
+    try:
+        experiments = [Dataset.from_recording(model, rec) for rec in recordings]
+    except FitError:
+        return
+    for name in check_excitation(experiments):
+        warnings.warn(
+            f"{name}: inputs constant and the plant at rest throughout; it tells nothing of "
+            "the parameters",
+            stacklevel=3,
+        )
 
 
 def _explaining_the_data(recordings, result: FitResult) -> FitResult:
@@ -271,6 +294,10 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
     for label, theta in thetas:
         values = problem.parameters(np.clip(theta, lower, upper))
         free = {n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
+        # exp(ln(bound / start)) can round a hair past the bound the continuation checks.
+        for name, (low, high) in options.bounds.items():
+            if name in free:
+                free[name] = min(max(free[name], low), high)
         unique.setdefault(tuple(free.values()), (label, initial.replace_values(**free)))
     return list(unique.values())
 

@@ -11,15 +11,13 @@ the points it knows (issue 25, "never worse than a point it knows"):
 - the sets the user names (``FitOptions.known_points``).
 
 The criterion is what ``hframe-id validate`` reproduces: a free-run simulation of each
-training recording (``validation.replay.simulate_channels``) from the replay's rest state
-for a record at rest (what ``validate`` starts it from), from the fit's estimated initial
-state for one in motion; for a fit that failed, from the better of that and the fit's own
-estimates (``judged_starts``). (The fit estimates a record's belt-free position at rest,
-``MultipleShooting.node_projector``: judged from there, a fit whose noise levels model error
-had inflated shifted a whole record by 9 mm and looked 13,000 units better than from rest,
-better than Table 4.1, which from rest beat it by 7,500: dev plant 22 ended "success" at 580
-x the plant's reduction's training cost.) Its residuals are weighted by the sensors' noise
-std per channel,
+training recording (``validation.replay.simulate_channels``) from the fit's estimated initial
+state (a record at rest: velocities zero, the positions' quantization phase estimated: fixed at
+the measured positions, it costs 1,100-2,100 chi^2/2 units on the six shipped steps, more than
+the differences between good points); for a fit that failed, from the better of that and the
+replay's rest state (what ``validate`` starts a record at rest from: a failed fit's estimated
+positions can be radians off, from where every other point looks worse) (``judged_starts``);
+its residuals weighted by the sensors' noise std per channel,
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2,
 
@@ -190,18 +188,18 @@ def _concentrated_term(squares: float, count: int, floor_std: float) -> float:
 
 def judged_starts(result) -> tuple[list[np.ndarray | None], ...]:
     """The initial states the points are judged from by a ``FitResult``'s ``Criterion``, as
-    per-record lists: the replay's rest state (None) for each record at rest, the fit's
-    estimate for one that starts in motion; for a fit that failed also the fit's estimates
-    (module docstring: a failed fit's estimated positions can be radians off, from where
-    every other point looks worse). (Both for every fit doubled the simulations: ``make fit``
-    took 1.58-1.83 s against 1.47-1.54 s, paired runs.)"""
+    per-record lists: the fit's estimates; for a fit that failed also the replay's rest state
+    (None) for each record at rest, with the fit's estimate for one that starts in motion
+    (module docstring). (Both for every fit doubled the simulations: ``make fit`` took
+    1.58-1.83 s against 1.47-1.54 s, paired runs; a converged fit's estimated states are its
+    optimum's.)"""
     own = list(result.initial_states)
+    if result.success:
+        return (own,)
     replay = [
         None if experiment.at_rest else x0
         for experiment, x0 in zip(result.problem.experiments, own, strict=True)
     ]
-    if result.success:
-        return (replay,)
     return own, replay
 
 

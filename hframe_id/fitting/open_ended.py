@@ -33,7 +33,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from hframe_id.fitting.known_points import Criterion
+from hframe_id.fitting.known_points import Criterion, judged_starts
 from hframe_id.fitting.problem import default_bounds
 from hframe_id.recordings.recording import Recording
 
@@ -89,10 +89,9 @@ def open_ends(
 ) -> list[OpenEnd]:
     """The ``OpenEnd`` test of each of ``names`` (free parameters of ``result``, a
     ``FitResult``, on its default box), by the criterion of its written file
-    (``known_points.Criterion``) from the fit's own initial states: the rise of the surface
-    the fit minimised."""
+    (``known_points.Criterion``) from the fit's initial states (``known_points.judged_starts``)."""
     criterion = Criterion.of(result, recordings)
-    starts = (list(result.initial_states),)
+    starts = judged_starts(result)
     own = criterion(result.parameters, starts)
     return [_open_end(result, name, lambda p: criterion(p, starts) - own) for name in names]
 

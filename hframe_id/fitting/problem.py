@@ -15,7 +15,6 @@ from __future__ import annotations
 import difflib
 import fnmatch
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -23,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.dataset import Dataset, check_excitation
+from hframe_id.fitting.dataset import Dataset
 from hframe_id.fitting.experiment import check_rigs, encoder_step
 from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
 from hframe_id.models import Model, build_model
@@ -393,8 +392,7 @@ def _experiments(
     """The recordings on the model's channels (``Dataset.from_recording``) advanced by their
     ``latency_samples`` (``Dataset.delayed``); ``FitError`` for ``channel_std`` or
     ``latency_samples`` naming no output, a record not longer than a ``shooting_interval``
-    [samples], an output with no valid sample, or records of which none excites the model
-    (``dataset.check_excitation``; a warning names each one at rest among others)."""
+    [samples], or an output with no valid sample."""
     outputs = [s.name for s in model.outputs]
     for name in wanted.channel_std:
         if name not in outputs:
@@ -419,12 +417,6 @@ def _experiments(
         empty = [name for j, name in enumerate(outputs) if not e.valid[:, j].any()]
         if empty:
             raise FitError(f"{e.name}: no valid sample of output {', '.join(empty)}")
-    for name in check_excitation(experiments):
-        warnings.warn(
-            f"{name}: inputs constant and the plant at rest throughout; it tells nothing of "
-            "the parameters",
-            stacklevel=2,
-        )
     return experiments
 
 
@@ -485,20 +477,3 @@ def rigid_modes(model: Model, p: np.ndarray) -> np.ndarray:
     u, sing, vt = np.linalg.svd(k)
     rank = int(np.sum(sing > sing.max() * 1e-9))
     return vt[rank:].T
-
-
-def rest_projector(model: Model, p: np.ndarray) -> np.ndarray:
-    """(n_x, n_x) orthogonal projector onto the initial-state steps of a record at rest: no
-    velocity, positions only along the rigid modes (``rigid_modes`` at ``p``), so the belts
-    stay unstretched: the model's equilibrium under no input, and the state ``validate``
-    starts such a record from (``validation.replay.rest_state``). Estimating the stretches
-    too let a fit start each record with belts pulled taut by up to 0.6 rad of motor angle,
-    followed data from there that the written file, replayed from rest, missed by 20,000
-    chi^2/2 units (issue 25, docs/studies/2026-11-26-rest-states.md). A model without
-    springs keeps every position free."""
-    nq = model.n_states // 2
-    modes = rigid_modes(model, p)
-    projector = np.zeros((model.n_states, model.n_states))
-    rigid = np.eye(nq) if modes.shape[1] == nq else modes @ modes.T
-    projector[:nq, :nq] = rigid
-    return projector

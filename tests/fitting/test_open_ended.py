@@ -108,21 +108,21 @@ def test_a_closed_end_states_the_rise_that_pushes_it_onto_the_box():
 
 
 def test_the_rise_is_the_fits_criterion_relative_to_its_own_value(monkeypatch):
-    """``open_ends`` judges every value by the fit's criterion from the fit's own initial
-    states (the surface it minimised), minus the criterion at the fit itself: here 100 +
-    (ln(p / 1600))^2 from the upper box, so the rise at 400 is (ln 4)^2 = 1.9218, just above
-    the threshold 1.9205: closed."""
+    """``open_ends`` judges every value by the fit's criterion from the fit's initial states,
+    minus the criterion at the fit itself: here 100 + (ln(p / 1600))^2 from the upper box,
+    so the rise at 400 is (ln 4)^2 = 1.9218, just above the threshold 1.9205: closed."""
     fit = _fit(1600.0)
-    fit.initial_states = (np.array([0.5, -0.25]),)
+    starts = object()
 
     def criterion(p, given_starts):
-        assert given_starts == ([fit.initial_states[0]],)
+        assert given_starts is starts
         value = 1600.0 if p is fit.parameters else p
         return 100.0 + np.log(value / 1600.0) ** 2
 
     monkeypatch.setattr(
         open_ended, "Criterion", SimpleNamespace(of=lambda result, recordings: criterion)
     )
+    monkeypatch.setattr(open_ended, "judged_starts", lambda result: starts)
     (end,) = open_ends(fit, [], ["k_l"])
     assert end.rise == pytest.approx(np.log(4.0) ** 2, rel=1e-12)
     assert end.nearer_value == 400.0 and not end.open
