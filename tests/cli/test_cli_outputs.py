@@ -13,10 +13,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from fit_rows import stored_fits
 from refusals import refused
 
 from hframe_id.cli import main
-from hframe_id.fleet.store import ResultsStore
 
 ROOT = Path(__file__).resolve().parents[2]
 H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
@@ -44,25 +44,12 @@ def work(tmp_path, monkeypatch) -> Path:
 def results(tmp_path_factory) -> Path:
     """A results store of two rigs, two runs each (enough for a report)."""
     path = tmp_path_factory.mktemp("store") / "results.parquet"
-    store = ResultsStore(path)
-    for i in range(4):
-        value = 13000.0 * (1 + 0.2 * (i % 2) * (i < 2))
-        store.add(
-            {
-                "key": f"k{i}",
-                "rig": f"rig-{1 + i // 2:02d}",
-                "run_time": dt.datetime(2026, 1, 5 + 7 * (i % 2), tzinfo=dt.UTC),
-                "status": "ok",
-                "message": "",
-                "k_l [N/m]": value,
-                "k_l std [N/m]": 10.0,
-                "k_l ci95 low [N/m]": value - 20,
-                "k_l ci95 high [N/m]": value + 20,
-                "k_l identified": True,
-            }
-        )
-    store.flush()
-    return path
+    rows = [
+        (f"k{i}", f"rig-{1 + i // 2:02d}", dt.datetime(2026, 1, 5 + 7 * (i % 2), tzinfo=dt.UTC),
+         13000.0 * (1 + 0.2 * (i % 2) * (i < 2)))
+        for i in range(4)
+    ]  # fmt: skip
+    return stored_fits(path, rows)
 
 
 #: A folder output on a file, under a file, and where nothing can be created.

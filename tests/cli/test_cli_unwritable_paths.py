@@ -21,10 +21,10 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
+from fit_rows import stored_fits
 
 from hframe_id.digests import sha256_file
 from hframe_id.fitting.output import make_fit_id
-from hframe_id.fleet.store import ResultsStore
 
 REPO = Path(__file__).resolve().parents[2]
 H8 = REPO / "models" / "hframe-8-table4.2.yaml"
@@ -330,24 +330,11 @@ def test_fit_writes_beside_a_read_only_parameter_file_of_its_id(runner, folder):
 
 def _results(path: Path) -> Path:
     """A results store of one rig's two fits, enough for ``fleet report``."""
-    store = ResultsStore(path)
-    for day, value in ((5, 13000.0), (12, 15000.0)):
-        store.add(
-            {
-                "key": f"k{day}",
-                "rig": "rig-01",
-                "run_time": datetime(2026, 1, day, tzinfo=UTC),
-                "status": "ok",
-                "message": "",
-                "k_l [N/m]": value,
-                "k_l std [N/m]": 10.0,
-                "k_l ci95 low [N/m]": value - 20,
-                "k_l ci95 high [N/m]": value + 20,
-                "k_l identified": True,
-            }
-        )
-    store.flush()
-    return path
+    return stored_fits(
+        path,
+        [(f"k{day}", "rig-01", datetime(2026, 1, day, tzinfo=UTC), value)
+         for day, value in ((5, 13000.0), (12, 15000.0))],
+    )  # fmt: skip
 
 
 def test_read_only_folder_is_not_replaced_even_with_force(runner, folder):
