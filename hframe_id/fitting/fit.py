@@ -78,7 +78,7 @@ def fit_recordings(
     ------
     FitError : before any solving, for a problem that cannot be fitted (mixed rigs or
         variants, unknown parameter names, bounds excluding the initial value, too few
-        valid samples).
+        valid samples, no recording that excites the model).
     """
     options = (options or FitOptions()).for_model(initial.variant)
     _check_excitation(recordings, initial.variant)
@@ -119,7 +119,7 @@ def _check_excitation(recordings, variant: str) -> None:
 def _explaining_the_data(recordings, result: FitResult) -> FitResult:
     """``result``, failed if it succeeded without simulating the records better than the
     model-free prediction that nothing moves (``known_points.held_criterion``: each channel
-    held at its first samples) by more than ``LIKELIHOOD_RATIO_95``: a fit of records whose
+    held at its mean) by more than ``LIKELIHOOD_RATIO_95``: a fit of records whose
     inputs do not drive what the outputs show (a red-team record with its voltages zeroed
     and its motion kept) ended "success", every parameter not identified."""
     if not result.success:

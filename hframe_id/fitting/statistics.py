@@ -170,7 +170,7 @@ def compute_statistics(
     jac = np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
     residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
     # ... and so does a finite one too large to square (1e200: its information overflows;
-    # an IPOPT continuation of a worn plant's fit raised a LinAlgError there). Once every
+    # an IPOPT continuation of unseen plant 1043's fit raised a LinAlgError there). Once every
     # diagonal entry is finite so is the rest (Cauchy-Schwarz).
     with np.errstate(over="ignore", invalid="ignore"):
         overflowing = ~np.isfinite(np.einsum("ij,ij->j", jac, jac))
