@@ -34,6 +34,7 @@ from hframe_id.fitting.known_points import (
     candidate_thetas,
     judged_starts,
     known_points,
+    replayed_starts,
 )
 from hframe_id.fitting.local_fit import fit_in_box
 from hframe_id.fitting.multistart import judged, seeded_starts
@@ -117,26 +118,30 @@ def _check_excitation(recordings, variant: str) -> None:
 
 
 def _explaining_the_data(recordings, result: FitResult) -> FitResult:
-    """``result``, failed if it succeeded without simulating the records better than the
-    model-free prediction that nothing moves (``known_points.held_criterion``: each channel
-    held at its mean) by more than ``LIKELIHOOD_RATIO_95``: a fit of records whose
-    inputs do not drive what the outputs show (a red-team record with its voltages zeroed
-    and its motion kept) ended "success", every parameter not identified."""
+    """``result``, failed if it succeeded without its written file, replayed as ``validate``
+    replays it (``known_points.replayed_starts``: a record at rest from the replay's rest
+    state), simulating the records better than the model-free prediction that nothing moves
+    (``known_points.held_criterion``: each channel held at its mean) by more than
+    ``LIKELIHOOD_RATIO_95``. A fit of records whose inputs do not drive what the outputs show
+    (a red-team record with its voltages zeroed and its motion kept) ended "success", every
+    parameter not identified; judged from its own estimated initial states it still did
+    (belts started stretched make the model move without input), as did a one-axis fit of
+    current-limited pulses whose replay from rest is worse than nothing moving (-1,314
+    against -1,683: docs/studies/2026-11-27-replayed-verdict.md)."""
     if not result.success:
         return result
     criterion = Criterion.of(result, recordings)
-    report = result.diagnostics.known_points
-    own = report.fit if report else criterion(result.parameters, judged_starts(result))
+    replayed = criterion(result.parameters, (replayed_starts(result),))
     held = criterion.held(result.parameters.variant)
-    if own < held - LIKELIHOOD_RATIO_95:
+    if replayed < held - LIKELIHOOD_RATIO_95:
         return result
     return replace(
         result,
         success=False,
-        message=f"the fitted model explains none of the data: simulated from the records' "
-        f"start it is no closer to them than every channel held still ({criterion.name}: "
-        f"{own:.6g} against {held:.6g}); the inputs do not drive what the outputs show "
-        f"under this model; {result.message}",
+        message=f"the fitted model explains none of the data: its file simulated from the "
+        f"records' start as validate replays it is no closer to them than every channel held "
+        f"still ({criterion.name}: {replayed:.6g} against {held:.6g}); the inputs do not "
+        f"drive what the outputs show under this model; {result.message}",
     )
 
 

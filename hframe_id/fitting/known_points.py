@@ -196,11 +196,17 @@ def judged_starts(result) -> tuple[list[np.ndarray | None], ...]:
     own = list(result.initial_states)
     if result.success:
         return (own,)
-    replay = [
+    return own, replayed_starts(result)
+
+
+def replayed_starts(result) -> list[np.ndarray | None]:
+    """The initial states ``hframe-id validate`` replays a ``FitResult``'s written file
+    from, per record: the replay's rest state (None) for a record at rest, the fit's
+    estimate for one that starts in motion."""
+    return [
         None if experiment.at_rest else x0
-        for experiment, x0 in zip(result.problem.experiments, own, strict=True)
+        for experiment, x0 in zip(result.problem.experiments, result.initial_states, strict=True)
     ]
-    return own, replay
 
 
 @dataclass(frozen=True)

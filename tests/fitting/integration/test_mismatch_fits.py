@@ -111,13 +111,18 @@ def test_a_fit_the_box_stops_succeeds_and_says_so():
     assert not result.estimates["k_l"].at_bound
 
 
-def test_a_success_under_mismatch_has_its_defects_at_tolerance():
+def test_a_fit_under_mismatch_ends_with_its_defects_at_tolerance_and_is_judged_by_its_replay():
     """Realistic one-axis plant 4 (current-limited pulses the one-axis model cannot follow):
     with estimated noise levels a stall with defects of 1.9 std was once accepted, the
     residual 3e-4 rad of a discontinuous trajectory (honest fits of such pulses end at
     0.2-3 rad); then the fit stalled, its noise rounds starting from the second state pre-pass's
     discontinuous iterate. Now the noise rounds start from the moving windows' continuous
-    trajectory and converge, defects at ``defect_tol``."""
+    trajectory and converge, defects at ``defect_tol``. That continuous trajectory starts
+    from estimated initial positions with the belts stretched (motor angle -1.08 rad, idler
+    4.5 rad against a cart at 43 mm): the written file, replayed from rest as ``validate``
+    does, is further from the data than every channel held still (concentrated criterion
+    -1,314 against -1,683; from the fit's own states -3,623), so the fit fails saying so
+    instead of reporting that success."""
     from studies.mismatch_one_axis import TABLE_2_3, plant_for, pulse_recordings
 
     # The idler spring k3 runs to any box here (the model wants a rigid idler under the
@@ -127,12 +132,11 @@ def test_a_success_under_mismatch_has_its_defects_at_tolerance():
     k3 = table.values["k3"]
     options = FitOptions(bounds={"k3": (k3 / 10, k3 * 10)})
     result = fit_recordings(pulse_recordings(plant_for(4), 0), table, options)
-    assert result.success, result.message
     assert result.stages[-1].max_defect <= FitOptions().defect_tol
+    assert result.stages[-1].converged, result.stages[-1].message
     assert result.diagnostics.noise.method == "estimated"
-    # A continuous one-axis trajectory cannot follow the 8 A limit: measured 2.97 rad rms
-    # on the motor angle. 0.1 rad is 60x above what the discontinuous iterate left.
-    assert result.diagnostics.channel_rms["phi1"] > 0.1
+    assert not result.success
+    assert result.message.startswith("the fitted model explains none of the data"), result.message
 
 
 @pytest.mark.slow
