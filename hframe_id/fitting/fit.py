@@ -118,20 +118,23 @@ def _check_excitation(recordings, variant: str) -> None:
 
 
 def _explaining_the_data(recordings, result: FitResult) -> FitResult:
-    """``result``, failed if it succeeded without its written file, replayed as ``validate``
-    replays it (``known_points.replayed_starts``: a record at rest from the replay's rest
-    state), simulating the records better than the model-free prediction that nothing moves
+    """``result`` with its written file's criterion replayed as ``validate`` replays it
+    (``known_points.replayed_starts``: a record at rest from the replay's rest state) in its
+    known-points report, and failed if it succeeded without that replay simulating the
+    records better than the model-free prediction that nothing moves
     (``known_points.held_criterion``: each channel held at its mean) by more than
     ``LIKELIHOOD_RATIO_95``. A fit of records whose inputs do not drive what the outputs show
     (a red-team record with its voltages zeroed and its motion kept) ended "success", every
     parameter not identified; judged from its own estimated initial states it still did
-    (belts started stretched make the model move without input), as did a one-axis fit of
+    (belts started stretched move the model without input), as did a one-axis fit of
     current-limited pulses whose replay from rest is worse than nothing moving (-1,314
-    against -1,683: docs/studies/2026-11-27-replayed-verdict.md)."""
-    if not result.success:
-        return result
+    against -1,683: docs/studies/2026-11-26-replayed-verdict.md)."""
     criterion = Criterion.of(result, recordings)
     replayed = criterion(result.parameters, (replayed_starts(result),))
+    report = replace(result.diagnostics.known_points, replayed=replayed)
+    result = result.with_diagnostics(known_points=report)
+    if not result.success:
+        return result
     held = criterion.held(result.parameters.variant)
     if replayed < held - LIKELIHOOD_RATIO_95:
         return result

@@ -73,14 +73,18 @@ class KnownPointsReport:
     """A fit judged against the points it knows, by the criterion ``criterion`` names
     (``Criterion.name``); every number is that criterion, C(p) of the module docstring
     (dimensionless: chi^2 / 2 units, or the concentrated criterion's), inf where the
-    simulation failed. ``fit``: the fit's own; ``points``: each known point's by its label,
-    best first; ``continued``: by the label of the point it started from, each fit continued
-    from a point (inf for one that failed), in the order they were tried."""
+    simulation failed. ``fit``: the fit's own, from the initial states the points are judged
+    from (``judged_starts``); ``points``: each known point's by its label, best first;
+    ``continued``: by the label of the point it started from, each fit continued from a point
+    (inf for one that failed), in the order they were tried; ``replayed``: the fit's
+    replayed as ``validate`` replays its written file (``replayed_starts``: a record at rest
+    from the replay's rest state), nan until measured."""
 
     criterion: str
     fit: float
     points: dict[str, float]
     continued: dict[str, float] = field(default_factory=dict)
+    replayed: float = math.nan
 
     @property
     def compared(self) -> dict[str, float]:

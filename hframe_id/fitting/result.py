@@ -212,8 +212,9 @@ class FitResult:
         others = report.compared
         label = min(others, key=others.get)
         return (
-            f"{report.criterion} from the recordings' start: {report.fit:.6g}; the best known "
-            f"point, {label}: {others[label]:.6g}"
+            f"{report.criterion}: replayed from the recordings' start as validate replays the "
+            f"file, {report.replayed:.6g}; from the fit's initial states, {report.fit:.6g}, "
+            f"and the best known point, {label}, {others[label]:.6g}"
         )
 
     @property

@@ -96,6 +96,9 @@ def fit_summary(
         if result.problem
         else {},
         "known_points": _known_points(result.diagnostics.known_points),
+        "replayed_criterion": _number(result.diagnostics.known_points.replayed)
+        if result.diagnostics.known_points
+        else None,
         "starts": _starts(result.diagnostics.starts),
     }
 

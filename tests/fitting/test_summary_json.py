@@ -31,6 +31,7 @@ def test_every_parameter_with_its_unit_interval_and_flags(small_result):
     assert summary["parameters"]["M_cart"]["std"] is None
     assert summary["parameters"]["M_cart"]["interval_95"] is None
     assert summary["starts"] is None and summary["known_points"] == {}
+    assert summary["replayed_criterion"] is None
     json.dumps(summary, allow_nan=False)  # plain JSON
 
 
@@ -57,4 +58,5 @@ def test_numbers_that_are_not_finite_are_null_and_extras_appear_when_present(sma
         "criterion": None,
     }
     assert summary["known_points"] == {"fit": 10.0, "the start": 12.0}
+    assert summary["replayed_criterion"] is None  # not measured: nan
     json.dumps(summary, allow_nan=False)
