@@ -208,10 +208,10 @@ def _add_transcription_options(parser: argparse.ArgumentParser) -> None:
         "--initial-state",
         choices=("auto", "rest", "estimate"),
         default="auto",
-        help="each recording's initial state: at rest (every velocity zero, as validate and "
-        "simulate start; positions estimated, within a sensor's resolution of the measured "
-        "ones) where the record's first 10 samples show rest, estimated where it starts in "
-        "motion (auto); every one at rest; or every one estimated",
+        help="each recording's initial state: at rest (every velocity zero and the belts "
+        "unstretched, as validate and simulate start; the belt-free position estimated) where "
+        "the record's first 10 samples show rest, estimated where it starts in motion (auto); "
+        "every one at rest; or every one estimated",
     )
 
 

@@ -284,10 +284,10 @@ def _information(
     experiment_rows = []
     column = 0
     ny = len(problem.output_names)
-    for e, entries in enumerate(ms.estimated_initial_states):
+    for e, basis in enumerate(ms.initial_state_bases):
         # ``condensed_jacobian`` lists the blocks experiment by experiment, channel by channel.
         rows = np.concatenate([b.rows for b in blocks[e * ny : (e + 1) * ny]])
-        n = int(entries.sum())
+        n = basis.shape[1]
         experiment_rows.append((np.sort(rows), np.arange(column, column + n)))
         column += n
     p = problem.parameters(theta)

@@ -113,11 +113,13 @@ class CondensedModel:
         h_pp = he[:, nx:, nx:].sum(axis=0)
         g_p = ge[:, nx:].sum(axis=0)
         # Eliminate the segments' first-node steps (block diagonal) by a Schur complement;
-        # known entries (a record's initial velocities at rest) take no step.
+        # a record's first node at rest steps only within its projector's range.
         damping = self.node_damping
         h_ss_d = _damped(h_ss, damping) + np.diag(self.prox)
-        _pin(h_ss_d, h_sp, g_s, self.ms.fixed_node[np.flatnonzero(np.r_[True, ~links])])
+        projector = self.ms.node_projector[np.flatnonzero(np.r_[True, ~links])]
+        rows = _restrict(h_ss_d, h_sp, g_s, projector)
         k = np.linalg.solve(h_ss_d, np.concatenate([h_sp, g_s[:, :, None]], axis=2))
+        k[rows] = projector[rows] @ k[rows]
         k_sp, k_g = k[:, :, :-1], k[:, :, -1]
         h_red = h_pp - np.einsum("sij,sik->jk", h_sp, k_sp)
         g_red = g_p - np.einsum("sij,si->j", h_sp, k_g)
@@ -182,14 +184,13 @@ class CondensedModel:
                 gmat[:, nx:] += b_all[i]
         jc = np.einsum("wkji,wil->wkjl", ev.jac_node, gains)
         jc[..., nx:] += jp_all
-        estimated = ms.estimated_initial_states
         n_nuisance = ms.n_nuisance
         full = np.zeros((w, m, ny, n_nuisance + nf))
         column = 0
-        for e, entries in enumerate(estimated):
+        for e, basis in enumerate(ms.initial_state_bases):
             idx = ms.window_experiment == e
-            n = int(entries.sum())
-            full[idx, :, :, column : column + n] = jc[idx][..., :nx][..., entries]
+            n = basis.shape[1]
+            full[idx, :, :, column : column + n] = jc[idx][..., :nx] @ basis
             column += n
         full[..., n_nuisance:] = jc[..., nx:]
         valid = ms.weight > 0
@@ -276,11 +277,12 @@ class CondensedModel:
         h_pp = np.einsum("wri,wrj->ij", jp, jp) + np.einsum("w,wki,wkj->ij", mu, b, b)
         g_p = np.einsum("wri,wr->i", jp, r) + np.einsum("w,wki,wk->i", mu, b, d)
         diag_d = _damped(diag, self.node_damping) + np.diag(self.prox)[None]
-        # Known node entries (a record's initial velocities at rest) take no step.
-        fixed = ms.fixed_node
-        _pin(diag_d, cross, grad, fixed)
-        upper[np.broadcast_to(fixed[:, :, None], upper.shape)] = 0.0
-        upper[:-1][np.broadcast_to(fixed[1:, None, :], upper[:-1].shape)] = 0.0
+        # A record's first node at rest steps only within its projector's range.
+        projector = ms.node_projector
+        rows = _restrict(diag_d, cross, grad, projector)
+        upper[rows] = projector[rows] @ upper[rows]
+        after = rows[rows > 0]
+        upper[after - 1] = upper[after - 1] @ projector[after]
         # Block Thomas: solve H_ss X = [cross, grad] for all right-hand sides at once.
         rhs = np.concatenate([cross, grad[:, :, None]], axis=2)
         c_prime = np.empty((w, nx, nx))
@@ -299,6 +301,7 @@ class CondensedModel:
         x[-1] = r_prime[-1]
         for i in range(w - 2, -1, -1):
             x[i] = r_prime[i] - c_prime[i] @ x[i + 1]
+        x[rows] = projector[rows] @ x[rows]  # (``_restrict``)
         x_p, x_g = x[:, :, :-1], x[:, :, -1]
         h_red = h_pp - np.einsum("wij,wik->jk", cross, x_p)
         g_red = g_p - np.einsum("wij,wi->j", cross, x_g)
@@ -316,14 +319,23 @@ class CondensedModel:
         return h_red, g_red, complete
 
 
-def _pin(blocks: np.ndarray, coupling: np.ndarray, gradient: np.ndarray, fixed: np.ndarray) -> None:
-    """Makes the ``fixed`` entries (S, n) of S node steps zero in the systems
-    ``blocks`` (S, n, n) d = -[``coupling`` (S, n, k) dtheta + ``gradient`` (S, n)]: their rows
-    and columns become those of the identity, their right-hand sides zero. In place."""
-    rows = np.broadcast_to(fixed[:, :, None], blocks.shape)
-    cols = np.broadcast_to(fixed[:, None, :], blocks.shape)
-    blocks[rows | cols] = 0.0
-    step, entry = np.nonzero(fixed)
-    blocks[step, entry, entry] = 1.0
-    coupling[fixed] = 0.0
-    gradient[fixed] = 0.0
+def _restrict(
+    blocks: np.ndarray, coupling: np.ndarray, gradient: np.ndarray, projector: np.ndarray
+) -> np.ndarray:
+    """Confines S node steps d to the ranges of their orthogonal ``projector``s (S, n, n) in
+    the systems ``blocks`` (S, n, n) d = -[``coupling`` (S, n, k) dtheta + ``gradient``
+    (S, n)]: blocks P H P + h (I - P), coupling P C, gradient P g, so d = P d, with h the
+    block's largest diagonal entry (with 1 in place of h, rounding of P H P at eps h, 1e4 in
+    a one-axis block, made the system singular). In place, and only where P is not the
+    identity (elsewhere the systems are left bit for bit as they were: a fit with no record
+    at rest is the same computation as before the projectors). Returns the indices of the
+    restricted steps. (Rounding leaves (I - P) d at eps |d|: callers project their solution
+    again at these indices.)"""
+    rows = np.flatnonzero(np.any(projector != np.eye(projector.shape[-1]), axis=(1, 2)))
+    p = projector[rows]
+    b = blocks[rows]
+    scale = np.max(np.abs(np.diagonal(b, axis1=1, axis2=2)), axis=1)[:, None, None]
+    blocks[rows] = p @ b @ p + scale * (np.eye(blocks.shape[-1]) - p)
+    coupling[rows] = p @ coupling[rows]
+    gradient[rows] = (p @ gradient[rows][:, :, None])[:, :, 0]
+    return rows

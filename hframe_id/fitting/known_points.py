@@ -10,14 +10,17 @@ the points it knows (issue 25, "never worse than a point it knows"):
   file of the same model beside it, e.g. Tables 4.1 and 4.2 for hframe-8),
 - the sets the user names (``FitOptions.known_points``).
 
-The criterion is what ``hframe-id validate`` reproduces: a free-run simulation of each
-training recording (``validation.replay.simulate_channels``) from the fit's estimated initial
-state (a record at rest: velocities zero, the positions' quantization phase estimated: fixed at
-the measured positions, it costs 1,100-2,100 chi^2/2 units on the six shipped steps, more than
-the differences between good points); for a fit that failed, from the better of that and the
-replay's rest state (what ``validate`` starts a record at rest from: a failed fit's estimated
-positions can be radians off, from where every other point looks worse) (``judged_starts``);
-its residuals weighted by the sensors' noise std per channel,
+The criterion is a free-run simulation of each training recording
+(``validation.replay.simulate_channels``) from the fit's estimated initial state (a record
+at rest: velocities zero, belts unstretched, the belt-free position estimated:
+``MultipleShooting.node_projector``; within a third of an encoder step of the replay's rest
+state on matched data, where it is worth 8 chi^2/2 units on 4V_xmotion.mcap); for a fit
+that failed, from the better of that and the replay's rest state (what ``validate`` starts a
+record at rest from: a failed fit's estimated positions can be far off, from where every
+other point looks worse) (``judged_starts``). The written file's criterion as ``validate``
+replays it (``replayed_starts``) is measured too (``KnownPointsReport.replayed``): a success
+must beat "nothing moves" by it (``fit._explaining_the_data``). Residuals are weighted by
+the sensors' noise std per channel,
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2,
 

@@ -249,7 +249,35 @@ class _Transcription:
         ).ravel()
         self.jac_defects = _sparse(n_link * nx, n_v, rows, cols, g_def, entry)
         self.sens_residual, self.sens_defects = residual, defects
+        self.n_defects = n_link * nx
         self._append_priors(problem, active, theta_active, nx * w)
+        self._append_rest_conditions(ms, z)
+
+    def _append_rest_conditions(self, ms: MultipleShooting, z: ca.MX) -> None:
+        """Rows C_i (s z_i) after the defects: the directions ``C_i`` in which a record's
+        first node at rest may not move beyond its fixed entries (``rest_conditions``),
+        held at the start's values by their bounds (``rest_targets``)."""
+        self.rest = rest_conditions(ms)
+        if not self.rest:
+            return
+        scaled = [(i, c * ms.defect_scale[None, :]) for i, c in self.rest]
+        conditions = ca.vertcat(*[ca.DM(c) @ z[:, i] for i, c in scaled])
+        rows = np.vstack([c for _, c in scaled])
+        first = np.concatenate([np.full(len(c), i) for i, c in scaled])
+        self.defects = ca.vertcat(self.defects, conditions)
+        self.sens_defects = ca.vertcat(self.sens_defects, conditions)
+        r, k = np.nonzero(rows)
+        cols = first[r] * ms.nx + k
+        order = np.lexsort((r, cols))
+        sparsity = ca.Sparsity.triplet(
+            len(rows), self.variables.shape[0], r[order].tolist(), cols[order].tolist()
+        )
+        jac = ca.MX(ca.DM(sparsity, rows[r[order], k[order]]))
+        self.jac_defects = ca.vertcat(self.jac_defects, jac)
+
+    def rest_targets(self, nodes: np.ndarray) -> np.ndarray:
+        """The rest conditions' values at ``nodes`` (W, n_x) [SI]: their bounds."""
+        return np.concatenate([c @ nodes[i] for i, c in self.rest] or [np.zeros(0)])
 
     def _append_priors(self, problem, active: np.ndarray, theta_active, offset: int) -> None:
         """Rows w theta of the active parameters' priors (``FitProblem.prior_weight``)
@@ -359,6 +387,24 @@ def _quiet_qp(name: str) -> dict:
     }[name]
 
 
+def rest_conditions(ms: MultipleShooting) -> list[tuple[int, np.ndarray]]:
+    """Per first window whose node may move only within a subspace beyond its fixed entries
+    (``MultipleShooting.node_projector``: a record at rest, positions along the rigid
+    modes): (window, C (c, n_x)), C's rows an orthonormal basis of the other directions
+    among the entries that are not fixed (those the bounds hold)."""
+    conditions = []
+    for i in ms.first_window:
+        projector = ms.node_projector[i]
+        if np.array_equal(projector, np.diag(np.diagonal(projector))):
+            continue
+        loose = ~ms.fixed_node[i]
+        values, vectors = np.linalg.eigh(np.eye(int(loose.sum())) - projector[np.ix_(loose, loose)])
+        rows = np.zeros((int(np.count_nonzero(values > 0.5)), ms.nx))
+        rows[:, loose] = vectors[:, values > 0.5].T
+        conditions.append((int(i), rows))
+    return conditions
+
+
 def _sparse(n_rows, n_cols, rows, cols, values: ca.MX, entry: np.ndarray) -> ca.MX:
     """(n_rows, n_cols) MX with the nonzeros ``values[entry]`` at (rows, cols) (no two
     alike): a constant gather, ordered column-major as CasADi stores nonzeros."""
@@ -416,8 +462,8 @@ def solve_nlp(
         upper = np.concatenate(
             [np.where(np.isnan(known), np.inf, known), problem.theta_upper[active]]
         )
-        n_g = nlp.defects.shape[0]
-        solution = solver(x0=x0, lbx=lower, ubx=upper, lbg=np.zeros(n_g), ubg=np.zeros(n_g))
+        held = np.concatenate([np.zeros(nlp.n_defects), nlp.rest_targets(nodes)])
+        solution = solver(x0=x0, lbx=lower, ubx=upper, lbg=held, ubg=held)
         stats = solver.stats()
         iterations += int(stats.get("iter_count", 0))
         v = np.array(solution["x"]).ravel()
@@ -427,7 +473,7 @@ def solve_nlp(
         if needed <= n_sub:
             break
         n_sub = needed
-    defects = np.array(solution["g"]).ravel()
+    defects = np.array(solution["g"]).ravel()[: nlp.n_defects]
     return NlpOutcome(
         nodes=nodes,
         theta=theta,

@@ -344,12 +344,12 @@ class FitOptions:
         control, the EMPS axis): a short horizon limits the drift's bias, a long one the
         noise's influence (docs/real-data.md).
     initial_state : each recording's initial state. ``"auto"`` (default): at rest (every
-        velocity zero, as ``hframe-id validate`` and ``simulate`` start; the positions
-        estimated, within a sensor's resolution of the measured ones) where the record's
-        first samples show rest (``dataset.starts_at_rest``), estimated where it starts in
-        motion; ``"rest"``: every record at rest; ``"estimate"``: every initial state
-        estimated. A free initial state can absorb model error that the written file,
-        simulated from rest, then shows (issue 25).
+        velocity zero and the belts unstretched, as ``hframe-id validate`` and ``simulate``
+        start; the belt-free position estimated: ``MultipleShooting.node_projector``)
+        where the record's first samples show rest (``dataset.starts_at_rest``), estimated
+        where it starts in motion; ``"rest"``: every record at rest; ``"estimate"``: every
+        initial state estimated. A free initial state can absorb model error that the
+        written file, simulated from rest, then shows (issue 25).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
         the model's (1e-3 m/s, 1e-2 rad/s).
     smoothing_schedule : continuation: factors applied to ``smoothing`` in the stages on the

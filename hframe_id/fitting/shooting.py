@@ -37,7 +37,7 @@ from hframe_id.fitting.kernel import (
     window_function,
 )
 from hframe_id.fitting.options import FitOptions, TranscriptionOptions
-from hframe_id.fitting.problem import FitProblem, output_matrix
+from hframe_id.fitting.problem import FitProblem, output_matrix, rest_projector
 from hframe_id.fitting.shooting_nodes import ShootingNodes
 from hframe_id.simulation.integrators import (
     MIN_SUBSTEPS,
@@ -71,6 +71,15 @@ class Evaluation:
         priors' residuals included."""
         prior = 0.0 if self.prior_residual is None else float(np.sum(self.prior_residual**2))
         return 0.5 * (float(np.sum(self.residual**2)) + prior)
+
+
+def _range_basis(projector: np.ndarray) -> np.ndarray:
+    """(n, r) orthonormal basis of an orthogonal projector's range: its identity columns
+    where it is diagonal (0 or 1 on the diagonal), else its unit eigenvectors."""
+    if np.array_equal(projector, np.diag(np.diagonal(projector))):
+        return np.eye(len(projector))[:, np.diagonal(projector) > 0.5]
+    values, vectors = np.linalg.eigh(projector)
+    return vectors[:, values > 0.5]
 
 
 def default_transcription(problem: FitProblem) -> TranscriptionOptions:
@@ -144,16 +153,18 @@ class MultipleShooting(ShootingNodes):
             self.transcription.continuity == "exact"
         )
         self.window_index_in_experiment = self.window_start // m
-        #: (W, n_x) True for the node entries that are known, not estimated: the velocities
-        #: of an experiment's first node where the record starts at rest (``Dataset.at_rest``)
-        self.fixed_node = np.zeros((len(exp_of), self.nx), dtype=bool)
-        self.fixed_node[:, self.nq :] = np.array(
-            [
-                k0 == 0 and problem.experiments[e].at_rest
-                for e, k0 in zip(exp_of, start, strict=True)
-            ],
-            dtype=bool,
-        )[:, None]
+        #: (W, n_x, n_x) orthogonal projector onto the steps each node may take: the
+        #: identity, but for an experiment's first node where the record starts at rest
+        #: (``Dataset.at_rest``): no velocity, and positions that move only along the
+        #: model's rigid modes (``problem.rest_projector``).
+        self.node_projector = np.broadcast_to(np.eye(self.nx), (len(exp_of), self.nx, self.nx))
+        self.node_projector = self.node_projector.copy()
+        at_rest_first = [
+            k0 == 0 and problem.experiments[e].at_rest for e, k0 in zip(exp_of, start, strict=True)
+        ]
+        self.node_projector[np.array(at_rest_first, dtype=bool)] = rest_projector(
+            self.model, problem.p_initial
+        )
         self.first_window = np.array(
             [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]
         )
@@ -209,7 +220,7 @@ class MultipleShooting(ShootingNodes):
             "window_start",
             "window_length",
             "window_index_in_experiment",
-            "fixed_node",
+            "node_projector",
             "inputs",
             "measured",
             "weight",
@@ -234,15 +245,22 @@ class MultipleShooting(ShootingNodes):
         return view
 
     @property
-    def estimated_initial_states(self) -> np.ndarray:
-        """(experiments, n_x) True for the initial-state entries that are estimated (all but
-        the velocities of a record at rest)."""
-        return ~self.fixed_node[self.first_window]
+    def fixed_node(self) -> np.ndarray:
+        """(W, n_x) True for the node entries that are known, not estimated (the velocities
+        of a record's first node at rest): the projector's zero rows."""
+        return ~np.any(self.node_projector, axis=2)
+
+    @property
+    def initial_state_bases(self) -> list[np.ndarray]:
+        """Per experiment, an orthonormal basis (n_x, r) of the directions in which its
+        initial state is estimated (``node_projector`` of its first window): identity
+        columns where the projector is diagonal (a record in motion: all n_x)."""
+        return [_range_basis(self.node_projector[i]) for i in self.first_window]
 
     @property
     def n_nuisance(self) -> int:
-        """Estimated initial-state entries (the statistics' nuisance parameters)."""
-        return int(np.count_nonzero(self.estimated_initial_states))
+        """Estimated initial-state directions (the statistics' nuisance parameters)."""
+        return sum(basis.shape[1] for basis in self.initial_state_bases)
 
     def residual_rms(self, cost: float) -> float:
         """Residual rms over the valid samples, in units of each channel's noise std, of a

@@ -25,11 +25,13 @@ class ShootingNodes:
         the belt-free (rigid) motion fitted to the measured ones, weighted by their noise.
         Velocities: central differences of the rigid-motion positions (encoder-dominated),
         or a rate's measurement (a tachometer) where valid; a coordinate measured only
-        through its rate takes that rate's integral from 0 as its position. Outputs that are
+        through its rate takes that rate's integral from 0 as its position; a record's first
+        node at rest takes the belt-free positions and no speed. Outputs that are
         other functions of the state (a motor current) do not enter. Returns nodes (W, n_x)
         and the velocity estimate (W, M + 1, n_q).
         """
         modes = rigid_modes(self.model, p)
+        springs = modes.shape[1] < self.nq
         cq = self.c[:, : self.nq]
         index = self.output_states
         position = (index >= 0) & (index < self.nq)
@@ -66,6 +68,8 @@ class ShootingNodes:
             velocity[windows] = rates[np.minimum(k0[:, None] + np.arange(self.m + 1), n - 1)]
             if exp.at_rest:
                 nodes[windows[0], self.nq :] = 0.0
+                if springs:  # unstretched at rest (``MultipleShooting.node_projector``)
+                    nodes[windows[0], : self.nq] = rigid[0]
         return nodes, velocity
 
     def _rigid_fit(self, design, modes, y, weights) -> np.ndarray:

@@ -1,9 +1,11 @@
 """A fit's all-window stage as an unconstrained least-squares problem (single shooting).
 
-The unknowns are z = (each experiment's estimated initial-state entries [SI], in experiment
-order; then the active free log-parameters theta = ln(p / p0)). The residuals r(z) are the
-noise-weighted output errors of every record simulated from its initial state (the
-transcription's windows chained: continuity holds by construction), with the priors' rows;
+The unknowns are z = (each experiment's initial state along its basis
+(``MultipleShooting.initial_state_bases``: every entry [SI] for a record in motion, the
+rigid-mode amplitudes for one at rest), in experiment order; then the active free
+log-parameters theta = ln(p / p0)). The residuals r(z) are the noise-weighted output
+errors of every record simulated from its initial state (the transcription's windows
+chained: continuity holds by construction), with the priors' rows;
 the Jacobian is the single-shooting one the statistics read
 (``GaussNewton.condensed_jacobian``). Any least-squares solver can minimise 1/2 |r(z)|^2
 over it (examples/scipy_solver.py plugs in SciPy's ``least_squares``).
@@ -35,7 +37,8 @@ class SingleShooting:
         self.ms = ms
         self.state = state
         self.smoothing = ms.problem.smoothing
-        self.estimated = ms.estimated_initial_states  # (experiments, n_x)
+        self.bases = ms.initial_state_bases  # per experiment (n_x, r)
+        self.n_initial = sum(basis.shape[1] for basis in self.bases)
         self.active = state.active.copy()
         self._linearisation = GaussNewton(ms)
         self._last: tuple[bytes, Evaluation, np.ndarray] | None = None
@@ -43,12 +46,13 @@ class SingleShooting:
     def start(self) -> np.ndarray:
         """z at the stage's start."""
         first = self.state.nodes[self.ms.first_window]
-        return np.concatenate([first[self.estimated], self.state.theta[self.active]])
+        amplitudes = [basis.T @ x0 for basis, x0 in zip(self.bases, first, strict=True)]
+        return np.concatenate([*amplitudes, self.state.theta[self.active]])
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of z: -inf/inf for the initial states, the parameters' box."""
         problem = self.ms.problem
-        n = int(np.count_nonzero(self.estimated))
+        n = self.n_initial
         lower = np.concatenate([np.full(n, -np.inf), problem.theta_lower[self.active]])
         upper = np.concatenate([np.full(n, np.inf), problem.theta_upper[self.active]])
         return lower, upper
@@ -57,16 +61,18 @@ class SingleShooting:
         """(nodes (W, n_x) [SI], theta (n_f,)) of ``z``: each record simulated from its
         initial state, the inactive parameters as in the start."""
         z = np.asarray(z, dtype=float)
-        n = int(np.count_nonzero(self.estimated))
         theta = self.state.theta.copy()
-        theta[self.active] = z[n:]
+        theta[self.active] = z[self.n_initial :]
         nodes = self.state.nodes.copy()
-        first = self.ms.first_window
-        initial = nodes[first]
-        initial[self.estimated] = z[:n]
-        nodes[first] = initial
+        column = 0
+        for basis, i in zip(self.bases, self.ms.first_window, strict=True):
+            # The known part of the initial state as it is, the estimated part from z.
+            r = basis.shape[1]
+            known = nodes[i] - basis @ (basis.T @ nodes[i])
+            nodes[i] = known + basis @ z[column : column + r]
+            column += r
         known = np.zeros(self.ms.n_windows, dtype=bool)
-        known[first] = True
+        known[self.ms.first_window] = True
         return self.ms.fill_nodes(nodes, known, theta, self.smoothing), theta
 
     def _evaluated(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -9,8 +9,8 @@ coordinates are the belt-free (rigid) motion that best fits the first sample's v
 measurements, weighted by the sensors' noise (so the encoders place the motors, and the cart,
 bridge and any unmeasured idler follow), averaged over the first ``REST_SAMPLES`` where the
 record shows rest there; every velocity is zero. The fitter starts such a record from the
-same velocities (``FitOptions.initial_state``; its positions are estimated, within a
-sensor's resolution of these), so that a fit's residuals are what this replay of its
+same velocities and unstretched belts (``FitOptions.initial_state``; its belt-free position
+is estimated), so that a fit's residuals are what this replay of its
 parameter file shows. A coordinate measured only through its rate (a tachometer) starts at 0
 with the measured rate as its velocity; outputs are the model's output map
 (``Model.output_map``) of the simulated states under the recording's inputs, whatever they

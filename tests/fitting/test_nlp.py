@@ -1,5 +1,7 @@
-"""CasADi's NLP solvers' settings (``fitting.nlp.NlpSettings``): one-line errors."""
+"""CasADi's NLP solvers (``fitting.nlp``): one-line errors for bad settings, and a record
+at rest held to unstretched belts."""
 
+import numpy as np
 import pytest
 
 from hframe_id.errors import OptionError
@@ -21,3 +23,29 @@ def test_bad_settings_give_one_line_errors(field, value, message):
         NlpSettings(**{field: value})
     assert str(error.value) == message
     assert "\n" not in str(error.value)
+
+
+def test_the_nlp_holds_a_record_at_rest_to_its_rigid_modes(table_and_step):
+    """A record at rest: two conditions (4 positions less 2 rigid modes, the velocities fixed
+    by their bounds), orthonormal and blind to the rigid modes; IPOPT from 20 % off moves the
+    first node only along them, to its constraint tolerance (1e-10, in SI here: the
+    conditions act on the node [m, rad]; the test allows 10 x that)."""
+    from hframe_id.fitting import FitOptions
+    from hframe_id.fitting.nlp import rest_conditions, solve_nlp
+    from hframe_id.fitting.problem import build_problem, rigid_modes
+    from hframe_id.fitting.shooting import MultipleShooting
+
+    table, step = table_and_step
+    problem = build_problem([step], table, FitOptions(free=("k_b", "M_cart")))
+    ms = MultipleShooting(problem).uniform()
+    (window, rows), *others = rest_conditions(ms)
+    assert window == 0 and not others and rows.shape == (2, ms.nx)
+    np.testing.assert_allclose(rows @ rows.T, np.eye(2), rtol=0, atol=1e-15)
+    modes = rigid_modes(ms.model, problem.p_initial)
+    np.testing.assert_allclose(rows[:, : ms.nq] @ modes, 0.0, rtol=0, atol=1e-15)
+    assert not rows[:, ms.nq :].any()
+    nodes, _ = ms.initial_nodes(problem.p_initial)
+    outcome = solve_nlp(ms, nodes, np.log([1.2, 0.8]), np.ones(2, dtype=bool), problem.smoothing)
+    assert np.any(outcome.nodes[0, : ms.nq] != nodes[0, : ms.nq])
+    np.testing.assert_allclose(rows @ outcome.nodes[0], rows @ nodes[0], rtol=0, atol=1e-9)
+    assert not outcome.nodes[0, ms.nq :].any()

@@ -87,3 +87,53 @@ def test_the_residual_jacobians_of_a_general_output_map_are_exact(servo):
     np.testing.assert_allclose(
         ev.jac_node[..., 1], numeric, rtol=0, atol=1e-5 * np.abs(numeric).max()
     )
+
+
+def test_a_record_at_rest_starts_with_unstretched_belts(table, x_step, in_motion):
+    """The first node of a record at rest moves only along the rigid modes (x, y with the
+    motors turning as the belts carry them: 2 of hframe-8's 4 positions), with no speed: its
+    projector is symmetric and idempotent, of rank 2, and every direction in its range
+    stretches no belt (the stiffness matrix annuls it); a record in motion estimates all 8
+    entries."""
+    from hframe_id.fitting.problem import rigid_modes
+
+    step = x_step(table, seed=5)
+    problem = build_problem([step, in_motion(step, 150)], table, FitOptions())
+    ms = MultipleShooting(problem)
+    rest, moving = (ms.node_projector[i] for i in ms.first_window)
+    # Rounding of M M^T from an orthonormal SVD basis: 1e-15 of its unit entries.
+    np.testing.assert_allclose(rest, rest.T, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(rest @ rest, rest, rtol=0, atol=1e-15)
+    assert round(np.trace(rest)) == 2 and not rest[:, ms.nq :].any()
+    modes = rigid_modes(ms.model, problem.p_initial)
+    np.testing.assert_allclose(rest[: ms.nq, : ms.nq] @ modes, modes, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(moving, np.eye(ms.nx))
+    np.testing.assert_array_equal(ms.fixed_node[ms.first_window[0]], [False] * 4 + [True] * 4)
+    assert [b.shape for b in ms.initial_state_bases] == [(8, 2), (8, 8)]
+    assert ms.n_nuisance == 10
+    for basis, projector in zip(ms.initial_state_bases, (rest, moving), strict=True):
+        np.testing.assert_allclose(basis @ basis.T, projector, rtol=0, atol=1e-15)
+
+
+def test_a_gauss_newton_step_keeps_the_start_at_rest(table_and_step):
+    """From a start off the data (k_b and M_cart 20 % off), every step moves the first node
+    of a record at rest within its projector's range: belts unstretched to rounding (the
+    solve is projected again: 1e-8 m had leaked, ``condensed._restrict``)."""
+    from hframe_id.fitting.builtin_solvers import GAUSS_NEWTON
+    from hframe_id.fitting.solver import GaussNewton, SolverState
+    from hframe_id.fitting.solvers import Stage
+
+    table, step = table_and_step
+    options = FitOptions(free=("k_b", "M_cart"))
+    problem = build_problem([step], table, options)
+    ms = MultipleShooting(problem).uniform()
+    nodes, _ = ms.initial_nodes(problem.p_initial)
+    nodes = ms.fill_nodes(nodes, np.eye(1, ms.n_windows, dtype=bool)[0], np.zeros(2),
+                          problem.smoothing)  # fmt: skip
+    state = SolverState(nodes, np.log([1.2, 0.8]), np.ones(2, dtype=bool))
+    solver_options = FitOptions(max_iterations=5).solver_options
+    GAUSS_NEWTON.solve(Stage("all", GaussNewton(ms), state, solver_options, {"radius": 0.5}))
+    first = state.nodes[0]
+    assert np.any(first != nodes[0])  # the rigid amplitudes were estimated
+    off = (np.eye(ms.nx) - ms.node_projector[0]) @ first
+    assert np.max(np.abs(off)) < 1e-15

@@ -25,7 +25,7 @@ def _single_shooting(table, recording, **options):
 
 
 def test_the_jacobian_is_the_residuals_derivative(table, x_step):
-    """Central differences in every unknown (the initial positions [rad, m], then log k_l and
+    """Central differences in every unknown (the initial rigid-mode amplitudes, then log k_l and
     log b_bridge): truncation and round-off below 1e-6 of the largest entry here; the
     tolerance, 1e-4 of it, is the condensed Jacobian's own test's."""
     shooting = _single_shooting(table, x_step(table, seed=6))

@@ -16,10 +16,11 @@ ROOT = Path(__file__).resolve().parents[3]
 
 def test_a_record_whose_voltages_were_zeroed_and_motion_kept_is_not_explained():
     """The red-team record: 4V_xmotion.mcap with its voltages set to zero and its motion
-    kept. Judged from its own estimated initial states (belts started stretched: motor
-    angles -1.15 and +1.19 rad, which move the model without input) the fit beat "nothing
-    moves" (-11,457 against -11,297, concentrated criterion) and was a success with every
-    parameter not identified; replayed from rest it is far worse (-8,496), and fails."""
+    kept. When every initial position was estimated, judged from its own initial states
+    (belts started stretched: motor angles -1.15 and +1.19 rad, which move the model without
+    input) the fit beat "nothing moves" (-11,457 against -11,297, concentrated criterion) and
+    was a success with every parameter not identified; replayed from rest it is far worse
+    (-8,496). The verdict is the replay's, whatever the initial states the fit estimates."""
     rec = read_recording(ROOT / "datasets" / "4V_xmotion.mcap")
     zeroed = dataclasses.replace(rec, inputs=np.zeros_like(rec.inputs))
     result = fit_recordings(

@@ -10,7 +10,7 @@ import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
 from hframe_id.fitting.known_points import simulation_criterion
-from hframe_id.fitting.problem import build_problem
+from hframe_id.fitting.problem import build_problem, rest_projector
 from hframe_id.models import build_model
 from hframe_id.validation.replay import channels, rest_state
 
@@ -25,17 +25,21 @@ def step(table, x_step):
 
 
 def test_a_record_at_rest_starts_at_rest(table, step):
-    """A record at rest starts with every velocity zero, its positions estimated (within a
-    sensor's resolution of the replay's rest state): its file, simulated from rest there,
-    reproduces the fit's cost (a free initial velocity once hid a 20x worse replay)."""
+    """A record at rest starts with every velocity zero and the belts unstretched, its
+    belt-free position estimated (within a sensor's resolution of the replay's rest state):
+    its file, simulated from there, reproduces the fit's cost (a free initial velocity once
+    hid a 20x worse replay)."""
     result = fit_recordings([step], table, FitOptions(free=FREE))
     assert result.success, result.message
     model = build_model("hframe-8")
     p = model.parameter_vector(result.parameters.values)
     rest = rest_state(model, p, channels(model, step))
     assert np.all(result.initial_states[0][4:] == 0.0)
-    resolution = np.array([1.96e-5, 1.96e-5, 5e-6, 5e-6])  # encoder step, laser std
+    resolution = np.array([5e-6, 5e-6, 1.96e-5, 1.96e-5])  # x, y: laser std; phi: encoder step
     assert np.all(np.abs(result.initial_states[0][:4] - rest[:4]) < resolution)
+    # Unstretched: on the rigid modes (the same at any stiffness; rounding of 1e-15 rad).
+    x0 = result.initial_states[0]
+    np.testing.assert_allclose(rest_projector(model, p) @ x0, x0, rtol=0, atol=1e-15)
     std = dict(result.diagnostics.channel_std)
     replayed = simulation_criterion(result.parameters, [step], std, None, result.initial_states)
     # The same RK4 (substeps from the same parameters): equal to the defects left (1e-2 std).

@@ -127,3 +127,4 @@ def test_a_failed_fit_is_also_judged_from_the_replays_rest_state(table, steps):
     criterion = Criterion.of(result, steps[:1])
     both = criterion(result.parameters, (own, replay))
     assert both == min(criterion(result.parameters, (own,)), criterion(result.parameters))
+
