@@ -209,7 +209,8 @@ def _add_transcription_options(parser: argparse.ArgumentParser) -> None:
         choices=("auto", "rest", "estimate"),
         default="auto",
         help="each recording's initial state: at rest (every velocity zero and the belts "
-        "unstretched, as validate and simulate start; the belt-free position estimated) where "
+        "unstretched, at the measured position, as validate and simulate start; the stages "
+        "estimate the belt-free position, a last solve takes validate's) where "
         "the record's first 10 samples show rest, estimated where it starts in motion (auto); "
         "every one at rest; or every one estimated",
     )
@@ -253,6 +254,13 @@ def _add_strategy_options(parser: argparse.ArgumentParser) -> None:
         default=FitOptions.start_seed,
         metavar="S",
         help="seed of the portfolio's draws (default 0)",
+    )
+    parser.add_argument(
+        "--start-as-given",
+        action="store_true",
+        help="begin from --initial even where the model's reference files or a --known file "
+        "simulate the records (all starting at rest) better (default: from the best of them, "
+        "said in the summary)",
     )
     parser.add_argument(
         "--no-first-stage",

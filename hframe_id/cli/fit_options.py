@@ -83,6 +83,7 @@ def fit_options(args: argparse.Namespace) -> FitOptions:
         zero_reachable=_names(args.zero_reachable) if args.zero_reachable else (),
         starts=args.starts,
         start_seed=args.start_seed,
+        screen_start=not args.start_as_given,
         max_iterations=args.max_iterations,
         step_tol=args.step_tol,
         defect_tol=args.defect_tol,

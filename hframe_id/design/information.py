@@ -197,8 +197,10 @@ def standard_errors(info: np.ndarray) -> np.ndarray:
 def design_options(free: Sequence[str], channel_std: Mapping[str, float] | None = None):
     """The fit's options for predicting a design: ``hframe-id fit``'s defaults
     (``FitOptions()``) with the free parameters ``free`` and, if given, the channels' noise
-    std ``channel_std`` (output name -> SI) instead of the sensors'."""
-    return FitOptions(free=tuple(free), channel_std=dict(channel_std or {}))
+    std ``channel_std`` (output name -> SI) instead of the sensors', on the transcription of
+    the fit's last solve (``rest_start`` "replay": a record at rest from the replay's rest
+    state, ``fitting.replayed_rest``), where its statistics are computed."""
+    return FitOptions(free=tuple(free), channel_std=dict(channel_std or {}), rest_start="replay")
 
 
 def fitted_channel_std(params: ParameterSet) -> dict[str, float]:

@@ -88,8 +88,10 @@ def parameter_estimates(
         bound = bool(state.active[f]) and is_at_bound(
             state.theta[f], problem.theta_lower[f], problem.theta_upper[f], rel
         )
-        floor = problem.zero_floor[f] and state.theta[f] < 0
-        if bound and floor:  # at zero: physics ends it there, not the box
+        # At zero (its lower bound, also from a start at 0): physics ends it there, not the box.
+        lower = state.theta[f] - problem.theta_lower[f] < problem.theta_upper[f] - state.theta[f]
+        floor = problem.zero_floor[f] and lower
+        if bound and floor:
             bound = False
         if bound:  # the box, not the data, fixes it
             at_bound.append(name)

@@ -26,7 +26,6 @@ import numpy as np
 
 from hframe_id.errors import FitError
 from hframe_id.fitting.dataset import Dataset, check_excitation
-from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import (
     Criterion,
@@ -42,7 +41,7 @@ from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.result import FitResult
-from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.fitting.start_screen import equation_error_theta, screen_start
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -84,16 +83,21 @@ def fit_recordings(
     options = (options or FitOptions()).for_model(initial.variant)
     _check_excitation(recordings, initial.variant)
     start = time.perf_counter()
+    screen = screen_start(recordings, initial, options)
+    screened = not screen.skipped
     if options.starts > 1:
-        result = _portfolio(recordings, initial, options)
+        result = _portfolio(recordings, screen.parameters, options, screened)
     else:
-        result = _fit_widening(recordings, initial, options)
+        result = _fit_widening(recordings, screen.parameters, options, screened)
+    if screen.moved:
+        result = replace(result, message=f"{result.message}; {screen.statement()}")
+    result = result.with_diagnostics(start_screen=screen)
     # The known points are judged by simulation from the recordings' start: the criterion of
     # an output-error fit. A prediction-error fit (continuity "none", for plants whose
     # simulation drifts) has no such criterion to compare by.
     if options.continuity == "exact":
         result = _explaining_the_data(
-            recordings, _never_worse_than_known(recordings, initial, options, result)
+            recordings, _never_worse_than_known(recordings, initial, options, result, screen)
         )
     result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
@@ -123,37 +127,43 @@ def _explaining_the_data(recordings, result: FitResult) -> FitResult:
     known-points report, and failed if it succeeded without that replay simulating the
     records better than the model-free prediction that nothing moves
     (``known_points.held_criterion``: each channel held at its mean) by more than
-    ``LIKELIHOOD_RATIO_95``. A fit of records whose inputs do not drive what the outputs show
-    (a red-team record with its voltages zeroed and its motion kept) ended "success", every
-    parameter not identified; judged from its own estimated initial states it still did
-    (belts started stretched move the model without input), as did a one-axis fit of
-    current-limited pulses whose replay from rest is worse than nothing moving (-1,314
-    against -1,683: docs/studies/2026-11-26-replayed-verdict.md)."""
+    ``LIKELIHOOD_RATIO_95`` (a failed fit says so of the point it ended at). A fit of records
+    whose inputs do not drive what the outputs show (a red-team record with its voltages
+    zeroed and its motion kept) ended "success", every parameter not identified; judged from
+    its own estimated initial states it still did (belts started stretched move the model
+    without input), as did a one-axis fit of current-limited pulses whose replay from rest
+    was worse than nothing moving (-1,314 against -1,683:
+    docs/studies/2026-11-26-replayed-verdict.md)."""
     criterion = Criterion.of(result, recordings)
     replayed = criterion(result.parameters, (replayed_starts(result),))
     report = replace(result.diagnostics.known_points, replayed=replayed)
     result = result.with_diagnostics(known_points=report)
-    if not result.success:
-        return result
     held = criterion.held(result.parameters.variant)
     if replayed < held - LIKELIHOOD_RATIO_95:
         return result
+    why = (
+        f"simulated from the records' start as validate replays it is no closer to them than "
+        f"every channel held still ({criterion.name}: {replayed:.6g} against {held:.6g}); the "
+        "inputs do not drive what the outputs show under this model"
+    )
+    if not result.success:  # said of the point it ended at too
+        return replace(result, message=f"{result.message}; it explains none of the data: {why}")
     return replace(
         result,
         success=False,
-        message=f"the fitted model explains none of the data: its file simulated from the "
-        f"records' start as validate replays it is no closer to them than every channel held "
-        f"still ({criterion.name}: {replayed:.6g} against {held:.6g}); the inputs do not "
-        f"drive what the outputs show under this model; {result.message}",
+        message=f"the fitted model explains none of the data: its file {why}; {result.message}",
     )
 
 
-def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
-    """The fit from ``initial`` and from ``options.starts - 1`` seeded draws around it
-    (``multistart``), one after another; the best successful one by its file's criterion
-    (the first's if none succeeded), with every start's outcome in ``diagnostics.starts``."""
+def _portfolio(
+    recordings, initial: ParameterSet, options: FitOptions, screened: bool = False
+) -> FitResult:
+    """The fit from ``initial`` (``screened``: as ``_fit_widening``) and from
+    ``options.starts - 1`` seeded draws around it (``multistart``), one after another; the
+    best successful one by its file's criterion (the first's if none succeeded), with every
+    start's outcome in ``diagnostics.starts``."""
     progress = progress_sink(options)
-    first = _fit_widening(recordings, initial, options)
+    first = _fit_widening(recordings, initial, options, screened)
     problem = first.problem
     kinds = {spec.name: spec.kind for spec in problem.model.parameters}
     draws = seeded_starts(
@@ -173,7 +183,9 @@ def _portfolio(recordings, initial: ParameterSet, options: FitOptions) -> FitRes
     return results[k][1].with_diagnostics(starts=tuple(outcomes))
 
 
-def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> FitResult:
+def _fit_widening(
+    recordings, initial: ParameterSet, options: FitOptions, screened: bool = False
+) -> FitResult:
     """The fit within the default box, repeated from ``initial`` while it ends on it
     (``BOX_WIDENINGS`` times): once a nonnegative parameter ends on its log-scale lower bound
     every free nonnegative one reaches 0 (``FitOptions.zero_reachable``: friction terms trade
@@ -186,7 +198,7 @@ def _fit_widening(recordings, initial: ParameterSet, options: FitOptions) -> Fit
     squarings = 0
     may_widen = True
     while True:
-        result = fit_in_box(recordings, initial, options, may_widen=may_widen)
+        result = fit_in_box(recordings, initial, options, may_widen=may_widen, screened=screened)
         boxed = result.diagnostics.at_default_box
         if not (boxed and may_widen):
             break
@@ -280,20 +292,26 @@ def _widened(
     )
 
 
-def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, result):
+def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, result, screen):
     """(label, parameter set) of the points a fit must not end worse than
     (``known_points``): the start, the equation-error estimate, the model's reference files
     and the user's ``FitOptions.known_points``, each with the start's fixed parameters and its
-    free values clipped into the user's bounds; sets equal in their free values once."""
+    free values clipped into the user's bounds; sets equal in their free values once. Those
+    the start screen judged (``screen``), where it ran."""
+    if screen.candidates:
+        return list(screen.candidates)
     problem = result.problem
     regressed = result.equation_error
     if regressed is None:
-        ms = MultipleShooting(problem, transcription=options.transcription_options)
-        ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
-        regressed = equation_error_start(
-            problem, ms.measured_positions, ms.measured_usable, threads=ms.threads
-        )
+        regressed = equation_error_theta(problem, options)
     thetas = candidate_thetas(problem, regressed, options.known_points)
+    return _clipped_points(problem, thetas, initial, options)
+
+
+def _clipped_points(problem, thetas, initial: ParameterSet, options: FitOptions):
+    """(label, parameter set) of each (label, theta of ``problem``): ``initial``'s fixed
+    parameters, the free ones clipped into the user's bounds (not the default box); sets
+    equal in their free values once, the first label kept."""
     # The user's bounds and physics (0 of a friction fitted linearly) hold for every point the
     # fit may continue from; the default box, drawn around the start, does not.
     lower = np.where(problem.box_lower, -np.inf, problem.theta_lower)
@@ -310,7 +328,7 @@ def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, re
     return list(unique.values())
 
 
-def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
+def _never_worse_than_known(recordings, initial, options, result, screen) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
     written file (a free-run simulation of each record, ``known_points.Criterion``): ended
     worse than one, it continues from the best of them; worse still, it fails saying so. A
@@ -326,7 +344,7 @@ def _never_worse_than_known(recordings, initial, options, result) -> FitResult:
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended
     # 300 x the reduction's training criterion; the failed fit's point simulated better).
     own = criterion(result.parameters, starts)
-    candidates = _known_candidates(recordings, initial, options, result)
+    candidates = _known_candidates(recordings, initial, options, result, screen)
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
     points = known_points(candidates, criterion, starts)

@@ -299,11 +299,28 @@ def candidate_thetas(
     return [
         ("the start", np.zeros(len(problem.free))),
         *([] if regressed is None else [("the equation-error estimate", regressed)]),
-        *((label, problem.theta_of(p)) for label, p in reference_sets(problem.initial.variant)),
-        *(
-            (f"known point {i + 1} ({p.title})", problem.theta_of(p))
-            for i, p in enumerate(user_points)
-        ),
+        *reference_thetas(problem, user_points),
+    ]
+
+
+def reference_thetas(
+    problem, user_points: Sequence[ParameterSet] = ()
+) -> list[tuple[str, np.ndarray]]:
+    """(label, theta of ``problem``) of ``reference_points``; not clipped."""
+    return [
+        (label, problem.theta_of(p))
+        for label, p in reference_points(problem.initial.variant, user_points)
+    ]
+
+
+def reference_points(
+    variant: str, user_points: Sequence[ParameterSet] = ()
+) -> list[tuple[str, ParameterSet]]:
+    """(label, parameter set) of the model's reference files (``reference_sets``) and of
+    ``user_points`` (``FitOptions.known_points``)."""
+    return [
+        *reference_sets(variant),
+        *((f"known point {i + 1} ({p.title})", p) for i, p in enumerate(user_points)),
     ]
 
 

@@ -18,7 +18,9 @@ measurements behind each choice); each stage is a function of the run's shared s
    that hold it (:func:`hframe_id.fitting.unmeasured.restarts_along_unmeasured_springs`);
 5. noise levels estimated with the fit where the model cannot follow the data at the
    sensors' level (:func:`hframe_id.fitting.noise_rounds.estimate_noise`);
-6. the misfit judgement (:func:`_misfit_judged`).
+6. a last solve with each record at rest started as ``validate`` replays it
+   (:func:`hframe_id.fitting.replayed_rest.solve_from_replayed_rest`);
+7. the misfit judgement (:func:`_misfit_judged`).
 
 A model with a coordinate no output measures first tries stages 1-3 with the node states
 estimated at the parameters held (a state-estimation pre-pass), and if that does not
@@ -42,6 +44,7 @@ from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.output_error import DEFERRED_STAGE, solve
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.progress import progress_sink
+from hframe_id.fitting.replayed_rest import replays_rest, solve_from_replayed_rest
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.stages import equation_error_report, estimate_states
@@ -60,13 +63,16 @@ def fit_in_box(
     initial: ParameterSet,
     options: FitOptions,
     may_widen: bool = False,
+    screened: bool = False,
 ) -> FitResult:
     """``fit_recordings`` within the box of ``options`` (its bounds and bound factor). With
     ``may_widen``, a first solve that ends on the default box returns before the noise
     rounds (the box will be opened and the fit repeated: measured on the lubricated plant of
     issue 25, the rounds took 25 of the 27 s of a fit whose six friction terms ended on the
-    box after the first solve and stayed there)."""
-    run = _started_run(recordings, initial, options)
+    box after the first solve and stayed there). ``screened``: ``initial`` is the start
+    screen's choice (``start_screen``), which judged the equation-error estimate already, by
+    the criterion the fit is judged by: the stages begin from ``initial`` as it is."""
+    run = _started_run(recordings, initial, options, regress=not screened)
     options = run.options
     # One-axis (a coordinate no output measures): first with the node states estimated at
     # the parameters held (converges from the truth on fresh plants, where the path from the
@@ -100,6 +106,8 @@ def fit_in_box(
         options = replace(options, channel_std=problem.problem_options.channel_std)
         run = replace(run, problem=problem, ms=ms, options=options)
         best = Fitted(state, gn, run.statistics(gn, state))
+    if run.stages[-1].converged and replays_rest(run):
+        run, best = solve_from_replayed_rest(run, best)
     best.solver.evaluations = run.counter["evaluations"]
     result = run.result(best)
     result = result.with_diagnostics(
@@ -113,9 +121,11 @@ def fit_in_box(
     return result
 
 
-def _started_run(recordings: list[Recording], initial: ParameterSet, options: FitOptions) -> FitRun:
+def _started_run(
+    recordings: list[Recording], initial: ParameterSet, options: FitOptions, regress: bool = True
+) -> FitRun:
     """The ``FitRun`` of a fit of ``recordings`` from ``initial`` with ``options``: the
-    problem, its transcription, the nodes from the measurements and, unless
+    problem, its transcription, the nodes from the measurements and, with ``regress`` unless
     ``options.first_stage`` is off, the equation-error regression (once for every attempt
     and for the known points, ``FitResult.equation_error``)."""
     started = time.perf_counter()
@@ -125,7 +135,7 @@ def _started_run(recordings: list[Recording], initial: ParameterSet, options: Fi
     progress = progress_sink(options)
     nodes, velocity = ms.initial_nodes(problem.p_initial)
     regression = None
-    if options.first_stage:
+    if options.first_stage and regress:
         theta = equation_error_start(
             problem, ms.measured_positions, ms.measured_usable, threads=ms.threads
         )

@@ -36,6 +36,7 @@ DEFAULT_CONTINUITY = "exact"
 #: not imported here because that module imports CasADi; a test keeps the two equal).
 LEFT_TO_MODEL = ("shooting_interval", "continuity")
 INITIAL_STATES = ("auto", "rest", "estimate")
+REST_STARTS = ("rigid", "replay")
 CONSIDER_METHODS = ("linear", "refit", "prior")
 
 
@@ -211,6 +212,7 @@ class TranscriptionOptions:
     substep_safety: float = 1.5
     max_substeps: int = 200
     threads: int = field(default_factory=_default_threads)
+    rest_start: str = "rigid"
 
     def __post_init__(self) -> None:
         if (
@@ -222,6 +224,7 @@ class TranscriptionOptions:
                 f"shooting interval must be >= 1 sample, got {shown(self.shooting_interval)}"
             )
         _one_of("continuity", self.continuity, CONTINUITY)
+        _one_of("rest_start", self.rest_start, REST_STARTS)
         _positive("substep_safety", self.substep_safety)
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {shown(self.substep_safety)}")
@@ -345,11 +348,11 @@ class FitOptions:
         noise's influence (docs/real-data.md).
     initial_state : each recording's initial state. ``"auto"`` (default): at rest (every
         velocity zero and the belts unstretched, as ``hframe-id validate`` and ``simulate``
-        start; the belt-free position estimated: ``MultipleShooting.node_projector``)
-        where the record's first samples show rest (``dataset.starts_at_rest``), estimated
-        where it starts in motion; ``"rest"``: every record at rest; ``"estimate"``: every
-        initial state estimated. A free initial state can absorb model error that the
-        written file, simulated from rest, then shows (issue 25).
+        start: ``rest_start``) where the record's first samples show rest
+        (``dataset.starts_at_rest``), estimated where it starts in motion; ``"rest"``:
+        every record at rest; ``"estimate"``: every initial state estimated. A free
+        initial state can absorb model error that the written file, simulated from rest,
+        then shows (issue 25).
     smoothing : final Coulomb smoothing velocities (linear [m/s], angular [rad/s]); default
         the model's (1e-3 m/s, 1e-2 rad/s).
     smoothing_schedule : continuation: factors applied to ``smoothing`` in the stages on the
@@ -390,6 +393,12 @@ class FitOptions:
     substep_safety, max_substeps : RK4 substeps are chosen from the current parameters so
         |lambda| h <= 2.785 / safety (see ``hframe_id.simulation.integrators``), capped.
     threads : worker threads for evaluating shooting windows.
+    rest_start : the first state of a record at rest. ``"rigid"`` (default): velocities zero,
+        belts unstretched, the belt-free position estimated (``MultipleShooting.
+        node_projector``); ``"replay"``: the replay's rest state (``validation.replay.
+        rest_state``, what ``validate`` starts the record from), nothing estimated. The
+        fit's stages take ``"rigid"`` and end with a solve under ``"replay"``
+        (``local_fit``), so that what it reports is what ``validate`` reproduces.
     verbose : 0 silent, 1 one line per iteration (to ``progress`` or stderr).
     progress : callable receiving :class:`FitProgress` after every iteration.
     zero_reachable : nonnegative parameters (friction) fitted linearly from 0, which they
@@ -404,6 +413,9 @@ class FitOptions:
         from ``initial`` and from ``starts - 1`` seeded draws around it (x/÷2 at most, one
         generator seeded with ``start_seed``), the best kept and how many reached it
         reported. 1 (default): the given start only.
+    screen_start : begin from the best of the start, the model's reference files and
+        ``known_points`` by their simulation from rest (``hframe_id.fitting.start_screen``;
+        default True); False: from the start as given.
     """
 
     free: tuple[str, ...] | None = None
@@ -433,11 +445,13 @@ class FitOptions:
     substep_safety: float = TranscriptionOptions.substep_safety
     max_substeps: int = TranscriptionOptions.max_substeps
     threads: int = field(default_factory=_default_threads)
+    rest_start: str = TranscriptionOptions.rest_start
     verbose: int = 0
     progress: Callable[[FitProgress], None] | None = None
     known_points: tuple[Any, ...] = ()  # ParameterSet objects
     zero_reachable: tuple[str, ...] = ()
     starts: int = 1
+    screen_start: bool = True
     start_seed: int = 0
 
     def __post_init__(self) -> None:
@@ -586,8 +600,10 @@ class FitOptions:
             "zero_reachable": list(self.zero_reachable),
             "starts": int(self.starts),
             "start_seed": int(self.start_seed),
+            "screen_start": bool(self.screen_start),
             "uncertainty": self.uncertainty,
             "confidence": float(self.confidence),
             "substep_safety": float(self.substep_safety),
             "max_substeps": int(self.max_substeps),
+            "rest_start": self.rest_start,
         }

@@ -15,6 +15,7 @@ from hframe_id.fitting.noise_rounds import NoiseReport
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem
 from hframe_id.fitting.solver import StageReport
+from hframe_id.fitting.start_screen import ScreenedStart
 from hframe_id.fitting.statistics import Statistics
 from hframe_id.parameters import ParameterSet
 
@@ -72,7 +73,8 @@ class FitDiagnostics:
     start, ``FitOptions.bound_factor``). ``noise``: how the channels were weighed
     (``noise_rounds.NoiseReport``); ``known_points``: the fit against the points it knows
     (``known_points.KnownPointsReport``); ``starts``: each start of a multistart portfolio
-    (``multistart.StartOutcome``; empty without one); ``consider``: what the intervals
+    (``multistart.StartOutcome``; empty without one); ``start_screen``: where the fit began
+    (``start_screen.ScreenedStart``); ``consider``: what the intervals
     assume about held parameters (``consider.Consider``). None where that step did not
     run."""
 
@@ -85,6 +87,7 @@ class FitDiagnostics:
     known_points: KnownPointsReport | None = None
     starts: tuple[StartOutcome, ...] = ()
     consider: Consider | None = None
+    start_screen: ScreenedStart | None = None
 
 
 @dataclass(frozen=True)

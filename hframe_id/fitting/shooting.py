@@ -156,14 +156,16 @@ class MultipleShooting(ShootingNodes):
         #: (W, n_x, n_x) orthogonal projector onto the steps each node may take: the
         #: identity, but for an experiment's first node where the record starts at rest
         #: (``Dataset.at_rest``): no velocity, and positions that move only along the
-        #: model's rigid modes (``problem.rest_projector``).
+        #: model's rigid modes (``problem.rest_projector``), or none at all, the node at the
+        #: replay's rest state (``TranscriptionOptions.rest_start`` "replay").
         self.node_projector = np.broadcast_to(np.eye(self.nx), (len(exp_of), self.nx, self.nx))
         self.node_projector = self.node_projector.copy()
         at_rest_first = [
             k0 == 0 and problem.experiments[e].at_rest for e, k0 in zip(exp_of, start, strict=True)
         ]
-        self.node_projector[np.array(at_rest_first, dtype=bool)] = rest_projector(
-            self.model, problem.p_initial
+        replayed = self.transcription.rest_start == "replay"
+        self.node_projector[np.array(at_rest_first, dtype=bool)] = (
+            0.0 if replayed else rest_projector(self.model, problem.p_initial)
         )
         self.first_window = np.array(
             [int(np.argmax(self.window_experiment == e)) for e in range(len(problem.experiments))]

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from hframe_id.fitting.problem import rigid_modes
+from hframe_id.validation.replay import rest_state
 
 
 class ShootingNodes:
@@ -26,7 +27,8 @@ class ShootingNodes:
         Velocities: central differences of the rigid-motion positions (encoder-dominated),
         or a rate's measurement (a tachometer) where valid; a coordinate measured only
         through its rate takes that rate's integral from 0 as its position; a record's first
-        node at rest takes the belt-free positions and no speed. Outputs that are
+        node at rest takes the belt-free positions and no speed (with ``rest_start``
+        "replay", the replay's rest state, ``validation.replay.rest_state``). Outputs that are
         other functions of the state (a motor current) do not enter. Returns nodes (W, n_x)
         and the velocity estimate (W, M + 1, n_q).
         """
@@ -66,7 +68,9 @@ class ShootingNodes:
             nodes[windows, : self.nq] = positions[k0]
             nodes[windows, self.nq :] = rates[k0]
             velocity[windows] = rates[np.minimum(k0[:, None] + np.arange(self.m + 1), n - 1)]
-            if exp.at_rest:
+            if exp.at_rest and self.transcription.rest_start == "replay":
+                nodes[windows[0]] = rest_state(self.model, p, exp)
+            elif exp.at_rest:
                 nodes[windows[0], self.nq :] = 0.0
                 if springs:  # unstretched at rest (``MultipleShooting.node_projector``)
                     nodes[windows[0], : self.nq] = rigid[0]

@@ -15,7 +15,12 @@ One JSON object, the same shape for every model::
                      chi^2 / 2, of the fit and the points it knows; {} if not compared),
      "starts": {"reached_best": 3, "outcomes": [{"label": "the start", "success": true,
                 "criterion": 1904.5}, ...]} (a multistart portfolio, ``--starts N``; null
-                without one)}
+                without one),
+     "began_from": {"label": "hframe-8-table4.1.yaml", "criteria": {"the start": -24687.3,
+                    "hframe-8-table4.1.yaml": -40014.9, ...}} (where the fit began,
+                    ``fitting.start_screen``: the best of the start and the model's reference
+                    files by their concentrated simulation criterion from rest; criteria {}
+                    where the screen did not run, with "skipped" saying why)}
 
 Values are SI, in the parameter's ``unit``. Parameters that were not free have ``std`` and
 ``interval_95`` null; numbers that are not finite (an interval the data do not bound) are null.
@@ -38,6 +43,7 @@ from typing import Any
 from hframe_id.fitting.known_points import KnownPointsReport
 from hframe_id.fitting.multistart import StartOutcome, reached_best
 from hframe_id.fitting.result import FitResult
+from hframe_id.fitting.start_screen import ScreenedStart
 
 
 def _number(value: float) -> float | None:
@@ -100,7 +106,16 @@ def fit_summary(
         if result.diagnostics.known_points
         else None,
         "starts": _starts(result.diagnostics.starts),
+        "began_from": _began_from(result.diagnostics.start_screen),
     }
+
+
+def _began_from(screen: ScreenedStart | None) -> dict[str, Any] | None:
+    """Where the fit began (``start_screen.ScreenedStart``) as plain data, or None."""
+    if screen is None:
+        return None
+    criteria = {label: _number(value) for label, value in screen.criteria.items()}
+    return {"label": screen.label, "criteria": criteria, "skipped": screen.skipped or None}
 
 
 def _known_points(report: KnownPointsReport | None) -> dict[str, float | None]:

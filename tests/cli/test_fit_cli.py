@@ -252,3 +252,23 @@ def test_a_multistart_portfolio_reports_how_many_starts_reached_the_best(tmp_pat
     assert "multistart: 3 of 3 starts reached the best optimum" in err
     (report,) = tmp_path.glob("*-report.md")
     assert "multistart: 3 of 3 starts" in report.read_text()
+
+
+def test_json_says_where_the_fit_began_and_start_as_given_keeps_the_start(tmp_path, capsys):
+    """From Table 4.2, the default start (its own file judged once, as the start), the fit
+    begins from the best point it knows; ``--start-as-given`` skips the screen, says so."""
+    import json
+
+    argv = ["fit", str(DATA), "--out-dir", str(tmp_path), "--no-plots", "--json"]
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    began = summary["began_from"]
+    criteria = began["criteria"]
+    assert list(criteria) == ["the start", "the equation-error estimate", "hframe-8-table4.1.yaml"]
+    # Matched data: the equation-error estimate simulates the step better than Table 4.2.
+    assert began["label"] == "the equation-error estimate" and began["skipped"] is None
+    assert criteria[began["label"]] == min(criteria.values())
+    assert "began from the equation-error estimate" in summary["message"]
+    assert main([*argv, "--start-as-given"]) == 0
+    began = json.loads(capsys.readouterr().out)["began_from"]
+    assert began == {"label": "the start", "criteria": {}, "skipped": "off"}

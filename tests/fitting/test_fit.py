@@ -47,7 +47,7 @@ def test_opening_friction_to_zero_does_not_use_up_a_widening(monkeypatch):
 
     calls = []
 
-    def fake(recordings, initial, options, may_widen=False):
+    def fake(recordings, initial, options, may_widen=False, screened=False):
         calls.append((options.bound_factor, options.zero_reachable, may_widen))
         boxed = ("b",) if not options.zero_reachable else ("m",)
         return _boxed_result(boxed, options)

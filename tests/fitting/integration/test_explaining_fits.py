@@ -27,7 +27,9 @@ def test_a_record_whose_voltages_were_zeroed_and_motion_kept_is_not_explained():
         [zeroed], load_parameter_file(ROOT / "models" / "hframe-8-table4.2.yaml")
     )
     assert not result.success
-    assert result.message.startswith("the fitted model explains none of the data"), result.message
+    # A success it would have been is failed by this rule; a fit that fails anyway (here:
+    # it began from the equation-error estimate and stalled) says it too.
+    assert "explains none of the data" in result.message, result.message
     criterion = Criterion.of(result, [zeroed])
     held = criterion.held("hframe-8")
     # The verdict is the replay's: measured 2,800 units above "nothing moves", 1.92 decides.

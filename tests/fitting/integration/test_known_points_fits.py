@@ -12,6 +12,9 @@ from hframe_id.fitting.known_points import simulation_criterion
 
 #: A small free set (stiffness, mass, viscous and Coulomb friction) for fast fits.
 FREE = ("k_l", "k_r", "M_cart", "b_cart", "F_c_cart")
+#: The fits that test what happens at the end begin at their start, not at a better known
+#: point (``fitting.start_screen``, tested in test_start_screen_fits.py).
+GIVEN = {"screen_start": False}
 
 
 def test_the_fit_is_compared_with_what_it_knows(table, truth, steps):
@@ -32,9 +35,9 @@ def _stopping_early(monkeypatch, table, outcome):
     real = fit_module._fit_widening
     calls = []
 
-    def fake(recordings, initial, options):
+    def fake(recordings, initial, options, screened=False):
         calls.append(initial)
-        result = real(recordings, initial, options)
+        result = real(recordings, initial, options, screened)
         if len(calls) == 1:
             result = replace(
                 result, parameters=table.replace_values(**{n: table.values[n] for n in FREE})
@@ -49,7 +52,7 @@ def _stopping_early(monkeypatch, table, outcome):
 
 def test_a_fit_worse_than_a_known_point_continues_from_it(monkeypatch, table, truth, steps):
     calls = _stopping_early(monkeypatch, table, lambda result: result)
-    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
+    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,), **GIVEN))
     assert len(calls) == 2
     assert result.success, result.message
     assert "continued from" in result.message
@@ -63,7 +66,7 @@ def test_a_fit_that_stays_worse_fails_saying_so(monkeypatch, table, truth, steps
         return replace(result, parameters=table)
 
     _stopping_early(monkeypatch, table, still_at_the_start)
-    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,)))
+    result = fit_recordings(steps, table, FitOptions(free=FREE, known_points=(truth,), **GIVEN))
     assert not result.success
     assert "the fit ends worse than" in result.message
     std = dict(result.diagnostics.channel_std)
@@ -100,7 +103,7 @@ def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, ste
     on the box; the truth, named as a known point, is not clipped into that box, and the fit
     from it succeeds."""
     start = table.replace_values(M_cart=1.15, F_c_cart=0.3)
-    options = FitOptions(free=("k_l",), bound_factor=1.001, known_points=(truth,))
+    options = FitOptions(free=("k_l",), bound_factor=1.001, known_points=(truth,), **GIVEN)
     result = fit_recordings(steps, start, options)
     assert result.success, result.message
     assert "continued from known point 1" in result.message
@@ -127,4 +130,3 @@ def test_a_failed_fit_is_also_judged_from_the_replays_rest_state(table, steps):
     criterion = Criterion.of(result, steps[:1])
     both = criterion(result.parameters, (own, replay))
     assert both == min(criterion(result.parameters, (own,)), criterion(result.parameters))
-

@@ -17,6 +17,7 @@ def test_a_portfolio_keeps_the_best_and_reports_every_start(table, x_step):
     assert [o.label for o in outcomes][0] == "the start" and len(outcomes) == 3
     # Matched data from a start within x/÷2: every start finds the truth's optimum.
     assert reached_best(outcomes) == 3
-    assert result.initial is table  # reported from the user's start, whichever won
+    # Reported from the point the fit began from (the start screen's), whichever start won.
+    assert result.initial is result.diagnostics.start_screen.parameters
     assert "multistart: 3 of 3 starts" in result.summary()
     assert fit_summary(result, "fit-id", None, None)["starts"]["reached_best"] == 3

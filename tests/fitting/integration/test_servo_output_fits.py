@@ -5,11 +5,15 @@ estimated from the residuals; the NLP solvers refuse an output that is no state.
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import pytest
-from servo_outputs import NOISE, TRUTH, servo_model_file, servo_recording, start
+from servo_outputs import NOISE, TRUTH, servo_model_file, servo_recording, servo_run, start
 
 from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting.dataset import REST_SAMPLES
 
 
 @pytest.fixture(scope="module")
@@ -74,6 +78,15 @@ def test_the_residuals_estimate_each_channels_noise(servo):
     )
     assert result.success, result.message
     channels = result.diagnostics.noise.channels
+    # The record starts from the replay's rest state (``fitting.replayed_rest``): the angle
+    # at the mean of its first REST_SAMPLES readings, off the true rest angle by their mean
+    # noise d, which every later angle residual keeps (nothing pulls a rotor back), so its
+    # rms is sqrt(std^2 + d^2); the speed starts at 0, exactly.
+    rec = servo_recording(name, 5)
+    _, _, clean = servo_run(name, 5, rec.outputs.shape[0])
+    theta = list(rec.output_names).index("theta")
+    offset = float(np.mean((rec.outputs - clean)[:REST_SAMPLES, theta]))
+    expected = {"theta": math.hypot(NOISE["theta"], offset), "omega": NOISE["omega"]}
     # The rms of 2000 residuals estimates each noise std within 2 sqrt(1 / (2 N)) = 3 %.
     for output in ("theta", "omega"):
-        assert channels[output].residual_rms == pytest.approx(NOISE[output], rel=0.03)
+        assert channels[output].residual_rms == pytest.approx(expected[output], rel=0.03)
