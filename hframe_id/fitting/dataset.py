@@ -27,7 +27,7 @@ from hframe_id.recordings.recording import Recording
 #: sample, fitted over its first ``REST_SAMPLES``, differs from zero by more than ``REST_Z``
 #: of its standard errors (a two-sided test at 0.27 % per channel). 10 ms at 1 kHz: within
 #: the pre-roll of every protocol here (>= 50 ms); the replay averages a record at rest over
-#: them for its rest positions (``validation.replay.rest_state``).
+#: them for its rest positions (``fitting.rest_state.rest_state``).
 REST_Z = 3.0
 REST_SAMPLES = 10
 

@@ -483,7 +483,7 @@ def rest_projector(model: Model, p: np.ndarray) -> np.ndarray:
     """(n_x, n_x) orthogonal projector onto the initial-state steps of a record at rest: no
     velocity, positions only along the rigid modes (``rigid_modes`` at ``p``), so the belts
     stay unstretched: the model's equilibrium under no input, and the state ``validate``
-    starts such a record from (``validation.replay.rest_state``). Estimating the stretches
+    starts such a record from (``fitting.rest_state.rest_state``). Estimating the stretches
     too let a fit start each record with belts pulled taut by up to 0.6 rad of motor angle,
     followed data from there that the written file, replayed from rest, missed by 20,000
     chi^2/2 units (issue 25, docs/studies/2026-11-26-rest-states.md). A model without

@@ -9,7 +9,7 @@ on the linear hframe-20 plant of issue 25, where the written file then replayed 
 concentrated units worse than the fit had reported (-179,887 against -184,684), worse than
 the point the fit began from. So once the stages have converged, the fit is solved once more
 with every record at rest started from the replay's rest state (``rest_start`` "replay",
-``validation.replay.rest_state``: nothing estimated), warm from where they ended, at the same
+``fitting.rest_state.rest_state``: nothing estimated), warm from where they ended, at the same
 weights. What the fit then reports, residuals and criterion, is what ``validate``
 reproduces from the written file (issue 25, item 1). A solve that does not converge is
 rejected, as a stalled noise round is: the fit keeps the stages' end and says so.

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from hframe_id.fitting.problem import rigid_modes
-from hframe_id.validation.replay import rest_state
+from hframe_id.fitting.rest_state import rest_state
 
 
 class ShootingNodes:
@@ -28,7 +28,7 @@ class ShootingNodes:
         or a rate's measurement (a tachometer) where valid; a coordinate measured only
         through its rate takes that rate's integral from 0 as its position; a record's first
         node at rest takes the belt-free positions and no speed (with ``rest_start``
-        "replay", the replay's rest state, ``validation.replay.rest_state``). Outputs that are
+        "replay", the replay's rest state, ``fitting.rest_state.rest_state``). Outputs that are
         other functions of the state (a motor current) do not enter. Returns nodes (W, n_x)
         and the velocity estimate (W, M + 1, n_q).
         """

@@ -33,12 +33,12 @@ import numpy as np
 
 from hframe_id.fitting.dataset import Dataset, state_outputs
 from hframe_id.fitting.problem import output_matrix
+from hframe_id.fitting.rest_state import measured_positions, measured_rates
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.simulation.compiled import maybe_compile
 from hframe_id.simulation.integrators import rk4_function, stable_substeps
 from hframe_id.simulation.open_loop import outputs_of
-from hframe_id.validation.replay import measured_positions, measured_rates
 
 #: Default window of past samples for the state estimate (the fitter's shooting interval).
 DEFAULT_WINDOW = 10
