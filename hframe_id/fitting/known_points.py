@@ -299,17 +299,10 @@ def candidate_thetas(
     return [
         ("the start", np.zeros(len(problem.free))),
         *([] if regressed is None else [("the equation-error estimate", regressed)]),
-        *reference_thetas(problem, user_points),
-    ]
-
-
-def reference_thetas(
-    problem, user_points: Sequence[ParameterSet] = ()
-) -> list[tuple[str, np.ndarray]]:
-    """(label, theta of ``problem``) of ``reference_points``; not clipped."""
-    return [
-        (label, problem.theta_of(p))
-        for label, p in reference_points(problem.initial.variant, user_points)
+        *(
+            (label, problem.theta_of(p))
+            for label, p in reference_points(problem.initial.variant, user_points)
+        ),
     ]
 
 
