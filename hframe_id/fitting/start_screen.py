@@ -30,7 +30,7 @@ identifiability is held there), and its message says where it began and why.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,19 +46,63 @@ EQUATION_ERROR = "the equation-error estimate"
 
 
 @dataclass(frozen=True)
+class RestCriterion:
+    """The screen's judge (module docstring) of a parameter set on ``recordings``: every
+    record simulated from rest, concentrated over the noise levels floored at the sensors'
+    ``channel_std`` [SI, by output], outputs lagging by ``latency_samples``; dimensionless,
+    concentrated chi^2 / 2 units, inf where a simulation fails."""
+
+    recordings: tuple
+    channel_std: dict[str, float]
+    latency_samples: dict[str, int]
+
+    def __call__(self, params: ParameterSet) -> float:
+        return simulation_criterion(
+            params, self.recordings, self.channel_std, self.latency_samples, None, True
+        )
+
+
+@dataclass(frozen=True)
+class Beginning:
+    """Where a fit in the default box begins (``fit._fit_widening``): ``parameters`` and
+    their ``criterion`` (``RestCriterion``; None until judged); ``statement``, for the
+    fit's message, says why it is not the start ("" for the start)."""
+
+    parameters: ParameterSet
+    criterion: float | None = None
+    statement: str = ""
+
+    def or_better(self, end: ParameterSet, judge: RestCriterion) -> Beginning:
+        """This beginning, or ``end`` (where a fit ended on its box) if ``judge`` finds it
+        better by more than ``LIKELIHOOD_RATIO_95``: the widened fit begins from the best
+        point it knows, as the first one did."""
+        own = judge(self.parameters) if self.criterion is None else self.criterion
+        criterion = judge(end)
+        if not criterion < own - LIKELIHOOD_RATIO_95:
+            return replace(self, criterion=own)
+        return Beginning(
+            end,
+            criterion,
+            "the box widened, the fit continued from where it had ended on it (concentrated "
+            f"criterion from rest {criterion:.6g} against {own:.6g} where it began)",
+        )
+
+
+@dataclass(frozen=True)
 class ScreenedStart:
     """Where a fit began: ``label`` and ``parameters`` of the point (``"the start"`` for the
     user's); ``criteria``, the screen's criterion of every point judged, by label (the
     start's first; dimensionless, concentrated chi^2 / 2 units; inf where the simulation
     failed); ``candidates``, the (label, parameter set) judged, sets equal in their free
-    values once. Both empty when the screen
-    did not run, ``skipped`` saying why."""
+    values once; ``criterion``, the judge (``RestCriterion``). All empty (None) when the
+    screen did not run, ``skipped`` saying why."""
 
     label: str
     parameters: ParameterSet
     criteria: dict[str, float]
     candidates: tuple[tuple[str, ParameterSet], ...] = ()
     skipped: str = ""
+    criterion: RestCriterion | None = None
 
     @property
     def moved(self) -> bool:
@@ -106,16 +150,16 @@ def screen_start(recordings, initial: ParameterSet, options: FitOptions) -> Scre
         clipped = _within_user_bounds(initial, point, problem.free_names, options.bounds)
         unique.setdefault(tuple(clipped.values[n] for n in problem.free_names), (label, clipped))
     candidates = tuple(unique.values())
-    std = dict(zip(problem.output_names, problem.channel_std, strict=True))
-    latency = dict(problem.problem_options.latency_samples)
-    criteria = {
-        label: simulation_criterion(params, recordings, std, latency, None, concentrated=True)
-        for label, params in candidates
-    }
+    judge = RestCriterion(
+        tuple(recordings),
+        dict(zip(problem.output_names, problem.channel_std, strict=True)),
+        dict(problem.problem_options.latency_samples),
+    )
+    criteria = {label: judge(params) for label, params in candidates}
     label = min(criteria, key=criteria.get)
     if not criteria[label] < criteria["the start"] - LIKELIHOOD_RATIO_95:
-        return ScreenedStart("the start", initial, criteria, candidates)
-    return ScreenedStart(label, dict(candidates)[label], criteria, candidates)
+        return ScreenedStart("the start", initial, criteria, candidates, criterion=judge)
+    return ScreenedStart(label, dict(candidates)[label], criteria, candidates, criterion=judge)
 
 
 def equation_error_theta(problem: FitProblem, options: FitOptions) -> np.ndarray:

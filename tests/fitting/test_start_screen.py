@@ -1,13 +1,15 @@
 """Where a fit begins (``fitting.start_screen``): the best point it knows, by the records'
 simulation from rest; the start wins ties and is kept where a record starts in motion."""
 
+import math
+
 import pytest
 
 from hframe_id.fitting import FitOptions
 from hframe_id.fitting.known_points import simulation_criterion
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.problem import build_problem
-from hframe_id.fitting.start_screen import EQUATION_ERROR, screen_start
+from hframe_id.fitting.start_screen import EQUATION_ERROR, Beginning, screen_start
 
 
 def _screen(recordings, start, **options):
@@ -63,3 +65,20 @@ def test_no_screen_where_a_record_starts_in_motion_or_it_is_off(table, steps, in
     assert screen.skipped == "a record starts in motion"
     assert _screen(steps, start, screen_start=False).skipped == "off"
     assert _screen(steps, start, continuity="none").skipped == "a prediction-error fit"
+
+
+def test_a_widened_fit_begins_from_a_box_end_only_if_it_is_judged_better(table):
+    """``Beginning.or_better``: a point where a fit ended on its box replaces the beginning
+    only when better by more than ``LIKELIHOOD_RATIO_95``, saying so."""
+    end = table.replace_values(M_cart=2 * table.values["M_cart"])
+    begin = Beginning(table, 100.0)
+    for criterion in (100.0, 100.0 - 0.99 * LIKELIHOOD_RATIO_95, 200.0, math.inf):
+        kept = begin.or_better(end, lambda params, c=criterion: c)
+        assert kept.parameters is table and kept.statement == ""
+    moved = begin.or_better(end, lambda params: 90.0)
+    assert moved.parameters is end and moved.criterion == 90.0
+    assert "continued from where it had ended on it" in moved.statement
+    assert "90 against 100" in moved.statement
+    # Judged once: an unjudged beginning is judged when a box end is to be compared.
+    judged = Beginning(table).or_better(end, lambda params: 100.0 if params is table else 150.0)
+    assert judged.parameters is table and judged.criterion == 100.0
