@@ -107,7 +107,7 @@ def fit_in_box(
         run = replace(run, problem=problem, ms=ms, options=options)
         best = Fitted(state, gn, run.statistics(gn, state))
     if run.stages[-1].converged and replays_rest(run):
-        run, best = solve_from_replayed_rest(run, best)
+        run, best = solve_from_replayed_rest(run, best, recordings)
     best.solver.evaluations = run.counter["evaluations"]
     result = run.result(best)
     result = result.with_diagnostics(

@@ -43,7 +43,9 @@ def test_no_last_solve_where_the_stages_fixed_the_rest_state(table, steps, fitte
     assert given.cost == pytest.approx(fitted.cost, abs=0.01)
 
 
-def test_a_last_solve_that_does_not_converge_is_rejected(monkeypatch, table, steps):
+@pytest.fixture()
+def stalling_last_solve(monkeypatch):
+    """The last solve run as it is, then reported as stopped unconverged."""
     real = replayed_rest.warm_solve
 
     def stalling(ms, start, stages, *args):
@@ -52,6 +54,24 @@ def test_a_last_solve_that_does_not_converge_is_rejected(monkeypatch, table, ste
         return state, gn
 
     monkeypatch.setattr(replayed_rest, "warm_solve", stalling)
+
+
+def test_an_unconverged_last_solve_that_replays_better_is_kept(stalling_last_solve, table, steps):
+    result = fit_recordings(steps, table, FitOptions(free=FREE))
+    assert result.success, result.message
+    assert result.stages[-2].name == replayed_rest.STAGE and not result.stages[-2].converged
+    assert result.stages[-1].name == f"{replayed_rest.STAGE}: kept unconverged"
+    assert "stopped unconverged" in result.message
+    # What the fit reports is what its file replays (within 1e-6 chi^2 / 2).
+    report = result.diagnostics.known_points
+    assert report.fit == pytest.approx(report.replayed, abs=1e-6)
+
+
+def test_an_unconverged_last_solve_that_replays_no_better_is_rejected(
+    stalling_last_solve, monkeypatch, table, steps
+):
+    # A judge that finds every end the same: the last solve's is then no better.
+    monkeypatch.setattr(replayed_rest, "_replay_criterion", lambda problem, recordings: len)
     result = fit_recordings(steps, table, FitOptions(free=FREE))
     assert result.success, result.message
     assert result.stages[-1].name == f"{replayed_rest.STAGE}: rejected"
