@@ -22,15 +22,12 @@ import time
 import warnings
 from dataclasses import replace
 
-import numpy as np
-
 from hframe_id.errors import FitError
 from hframe_id.fitting.dataset import Dataset, check_excitation
 from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import (
     Criterion,
     KnownPointsReport,
-    candidate_thetas,
     judged_starts,
     known_points,
     replayed_starts,
@@ -45,6 +42,7 @@ from hframe_id.fitting.start_screen import (
     Beginning,
     RestCriterion,
     equation_error_theta,
+    known_candidates,
     screen_start,
 )
 from hframe_id.models import build_model
@@ -311,40 +309,16 @@ def _widened(
     )
 
 
-def _known_candidates(recordings, initial: ParameterSet, options: FitOptions, result, screen):
+def _known_candidates(initial: ParameterSet, options: FitOptions, result, screen):
     """(label, parameter set) of the points a fit must not end worse than
-    (``known_points``): the start, the equation-error estimate, the model's reference files
-    and the user's ``FitOptions.known_points``, each with the start's fixed parameters and its
-    free values clipped into the user's bounds; sets equal in their free values once. Those
-    the start screen judged (``screen``), where it ran."""
+    (``start_screen.known_candidates``): those the start screen judged (``screen``), where it
+    ran; else the same points of ``result``'s problem."""
     if screen.candidates:
         return list(screen.candidates)
-    problem = result.problem
     regressed = result.equation_error
     if regressed is None:
-        regressed = equation_error_theta(problem, options)
-    thetas = candidate_thetas(problem, regressed, options.known_points)
-    return _clipped_points(problem, thetas, initial, options)
-
-
-def _clipped_points(problem, thetas, initial: ParameterSet, options: FitOptions):
-    """(label, parameter set) of each (label, theta of ``problem``): ``initial``'s fixed
-    parameters, the free ones clipped into the user's bounds (not the default box); sets
-    equal in their free values once, the first label kept."""
-    # The user's bounds and physics (0 of a friction fitted linearly) hold for every point the
-    # fit may continue from; the default box, drawn around the start, does not.
-    lower = np.where(problem.box_lower, -np.inf, problem.theta_lower)
-    upper = np.where(problem.box_upper, np.inf, problem.theta_upper)
-    unique = {}
-    for label, theta in thetas:
-        values = problem.parameters(np.clip(theta, lower, upper))
-        free = {n: float(values[i]) for i, n in zip(problem.free, problem.free_names, strict=True)}
-        # exp(ln(bound / start)) can round a hair past the bound the continuation checks.
-        for name, (low, high) in options.bounds.items():
-            if name in free:
-                free[name] = min(max(free[name], low), high)
-        unique.setdefault(tuple(free.values()), (label, initial.replace_values(**free)))
-    return list(unique.values())
+        regressed = equation_error_theta(result.problem, options)
+    return list(known_candidates(initial, result.problem, options, regressed))
 
 
 def _never_worse_than_known(recordings, initial, options, result, screen) -> FitResult:
@@ -363,7 +337,7 @@ def _never_worse_than_known(recordings, initial, options, result, screen) -> Fit
     # plant 10: a fit failed on the box, continued from the equation-error estimate, ended
     # 300 x the reduction's training criterion; the failed fit's point simulated better).
     own = criterion(result.parameters, starts)
-    candidates = _known_candidates(recordings, initial, options, result, screen)
+    candidates = _known_candidates(initial, options, result, screen)
     if not result.success:
         candidates = [(label, params) for label, params in candidates if label != "the start"]
     points = known_points(candidates, criterion, starts)

@@ -290,22 +290,6 @@ def reference_sets(variant: str) -> list[tuple[str, ParameterSet]]:
     return sets
 
 
-def candidate_thetas(
-    problem, regressed: np.ndarray | None, user_points: Sequence[ParameterSet] = ()
-) -> list[tuple[str, np.ndarray]]:
-    """(label, theta of ``problem``) of every point a fit knows: the start (theta 0), the
-    equation-error estimate ``regressed`` (if any), the model's reference files
-    (``reference_sets``) and ``user_points`` (``FitOptions.known_points``); not clipped."""
-    return [
-        ("the start", np.zeros(len(problem.free))),
-        *([] if regressed is None else [("the equation-error estimate", regressed)]),
-        *(
-            (label, problem.theta_of(p))
-            for label, p in reference_points(problem.initial.variant, user_points)
-        ),
-    ]
-
-
 def reference_points(
     variant: str, user_points: Sequence[ParameterSet] = ()
 ) -> list[tuple[str, ParameterSet]]:

@@ -140,16 +140,8 @@ def screen_start(recordings, initial: ParameterSet, options: FitOptions) -> Scre
     # In SI, not through theta = ln(p / p_start) where avoidable: the round trip moves the
     # last bits with the start, and the fit's path amplifies them (two seeded starts of the
     # heavy plant began from Table 4.1 so and ended 15 % apart in motor-angle rms).
-    points = [("the start", initial)]
-    if options.first_stage:
-        theta = equation_error_theta(problem, options)
-        points.append((EQUATION_ERROR, _with_free(initial, problem, problem.parameters(theta))))
-    points += reference_points(initial.variant, options.known_points)
-    unique = {}  # sets equal in their free values once, the first label kept
-    for label, point in points:
-        clipped = _within_user_bounds(initial, point, problem.free_names, options.bounds)
-        unique.setdefault(tuple(clipped.values[n] for n in problem.free_names), (label, clipped))
-    candidates = tuple(unique.values())
+    regressed = equation_error_theta(problem, options) if options.first_stage else None
+    candidates = known_candidates(initial, problem, options, regressed)
     judge = RestCriterion(
         tuple(recordings),
         dict(zip(problem.output_names, problem.channel_std, strict=True)),
@@ -160,6 +152,26 @@ def screen_start(recordings, initial: ParameterSet, options: FitOptions) -> Scre
     if not criteria[label] < criteria["the start"] - LIKELIHOOD_RATIO_95:
         return ScreenedStart("the start", initial, criteria, candidates, criterion=judge)
     return ScreenedStart(label, dict(candidates)[label], criteria, candidates, criterion=judge)
+
+
+def known_candidates(
+    initial: ParameterSet, problem: FitProblem, options: FitOptions, regressed=None
+) -> tuple[tuple[str, ParameterSet], ...]:
+    """(label, parameter set) of every point a fit of ``problem`` knows: the start
+    ``initial``, the equation-error estimate (``regressed``, log-parameters theta of
+    ``problem``, if given), the model's reference files and ``options.known_points``
+    (``known_points.reference_points``); each with ``initial``'s fixed parameters and its
+    free values clipped into the user's bounds (not the default box, drawn around the start),
+    sets equal in their free values once, the first label kept."""
+    points = [("the start", initial)]
+    if regressed is not None:
+        points.append((EQUATION_ERROR, _with_free(initial, problem, problem.parameters(regressed))))
+    points += reference_points(initial.variant, options.known_points)
+    unique = {}
+    for label, point in points:
+        clipped = _within_user_bounds(initial, point, problem.free_names, options.bounds)
+        unique.setdefault(tuple(clipped.values[n] for n in problem.free_names), (label, clipped))
+    return tuple(unique.values())
 
 
 def equation_error_theta(problem: FitProblem, options: FitOptions) -> np.ndarray:

@@ -63,8 +63,9 @@ def springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting)
 def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
     """Restarts from ``best`` with each free stiffness of a belt section at an unmeasured
     pulley moved by x/÷ each of ``RESTART_FACTORS``; keeps the lowest converged cost,
-    repeated while it improves (at most ``RESTART_LIMIT`` solves), and reports them as one
-    stage. Also run when the fit has not converged: a converged restart replaces it.
+    repeated while it improves (at most ``RESTART_LIMIT`` solves; a move already solved from
+    the current best is not solved again: its solve is deterministic), and reports them as
+    one stage. Also run when the fit has not converged: a converged restart replaces it.
 
     Each restart is one ``output_error.solve`` (with the state-estimation pre-pass) from the
     fit's end point with one stiffness moved, its stages judged apart (``FitRun.trial``).
@@ -75,12 +76,18 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
     start = time.perf_counter()
     tried = iterations = 0
     improved = True
+    since_improved = set()  # (index, factor) solved from the current best: not again
     while improved and tried < RESTART_LIMIT:
         improved = False
         for index in springs:
             for factor in (f**sign for f in RESTART_FACTORS for sign in (1, -1)):
-                if not state.active[index] or tried >= RESTART_LIMIT:
+                if (
+                    not state.active[index]
+                    or tried >= RESTART_LIMIT
+                    or (index, factor) in since_improved
+                ):
                     continue
+                since_improved.add((index, factor))
                 theta = state.theta.copy()
                 theta[index] = np.clip(
                     theta[index] + math.log(factor),
@@ -95,6 +102,7 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
                 if trial.stages[-1].converged and gain > RESTART_MIN_GAIN:
                     state, gn, final = trial_state, trial_gn, trial.stages[-1]
                     improved = True
+                    since_improved = set()
     if state is best.state:
         final = run.stages[-1]
     else:
