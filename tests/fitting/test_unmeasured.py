@@ -1,0 +1,46 @@
+"""Restarts along the springs at an unmeasured coordinate (``fitting.unmeasured``): the
+search over moves, with the solves replaced by a stand-in whose cost is known."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from hframe_id.fitting import unmeasured
+from hframe_id.fitting.fit_run import Fitted
+from hframe_id.fitting.solver import SolverState, StageReport
+
+
+def _report(name="solve", cost=0.0):
+    return StageReport(name, (0.0, 0.0), 1, True, "converged", cost, 0.0, 0.0)
+
+
+def test_a_move_is_not_solved_twice_from_the_same_best(monkeypatch):
+    """Two springs, four moves each: the first move improves (the search goes on from
+    there), none after it does. Each (move, point moved from) is solved once: 8 moves from
+    the start's best, then only the move that had been tried before the improvement, again
+    from the new best: 9 solves, where repeating every move of the second pass took 16."""
+    solved = []
+
+    def solve(trial, theta, active, prepass):
+        solved.append(np.round(theta, 12).tobytes())
+        cost = 10.0 if len(solved) == 1 else 100.0  # only the first move improves
+        trial.stages.append(_report(cost=cost))
+        return SolverState(None, theta, active, SimpleNamespace(cost=cost)), "solver"
+
+    monkeypatch.setattr(unmeasured, "solve", solve)
+    monkeypatch.setattr(unmeasured, "springs_at_unmeasured_coordinates", lambda problem, ms: [0, 1])
+    problem = SimpleNamespace(
+        free_names=("k2", "k3"), theta_lower=np.full(2, -9.0), theta_upper=np.full(2, 9.0)
+    )
+    run = SimpleNamespace(
+        problem=problem,
+        ms=None,
+        stages=[_report(cost=50.0)],
+        trial=lambda label: SimpleNamespace(stages=[]),
+        statistics=lambda gn, state: "statistics",
+    )
+    start = SolverState(None, np.zeros(2), np.ones(2, bool), SimpleNamespace(cost=50.0))
+    fitted = unmeasured.restarts_along_unmeasured_springs(run, Fitted(start, "solver", None))
+    assert len(solved) == len(set(solved)) == 9
+    assert fitted.state.evaluation.cost == 10.0
+    assert "9 restarts" in run.stages[-1].message
