@@ -92,22 +92,18 @@ def fit_in_box(
     settling = None
     mismatch = deferred or run.ms.residual_rms(best.state.evaluation.cost) > MISMATCH_RMS
     if options.noise == "estimate" or (options.noise == "auto" and mismatch):
-        problem, ms, state, gn, rounds, settling = estimate_noise(
-            run.problem,
-            run.ms,
-            best.state,
-            recordings,
-            run.stages,
-            run.counter,
-            run.progress,
-            options,
-        )
         # The fit is now of the problem weighted by the estimated levels, and says so.
-        options = replace(options, channel_std=problem.problem_options.channel_std)
-        run = replace(run, problem=problem, ms=ms, options=options)
+        run, state, gn, rounds, settling = estimate_noise(run, best.state, recordings, sensor_std)
         best = Fitted(state, gn, run.statistics(gn, state))
     if run.stages[-1].converged and replays_rest(run):
         run, best = solve_from_replayed_rest(run, best, recordings)
+        if rounds and run.options.rest_start == "replay":
+            # Its end kept: the levels of the point the fit reports, the rounds from rest.
+            run, state, gn, rounds, settling = estimate_noise(
+                run, best.state, recordings, sensor_std, rounds + 1, best.solver
+            )
+            if state is not best.state:
+                best = Fitted(state, gn, run.statistics(gn, state), best.held)
     best.solver.evaluations = run.counter["evaluations"]
     result = run.result(best)
     result = result.with_diagnostics(

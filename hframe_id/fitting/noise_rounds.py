@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,6 +34,9 @@ from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.stages import exact_stage
+
+if TYPE_CHECKING:  # fit_run imports this module (through estimates)
+    from hframe_id.fitting.fit_run import FitRun
 
 #: Noise estimation (``FitOptions.noise``): a sensor-weighted fit whose residual rms exceeds
 #: this many sensor std does not fit at the noise level (matched sim-rig fits end at
@@ -107,45 +111,55 @@ def channel_rms(ms: MultipleShooting, ev: Evaluation) -> dict[str, float]:
 
 
 def estimate_noise(
-    problem: FitProblem, ms, state: SolverState, recordings, stages, counter, progress, options
+    run: FitRun,
+    state: SolverState,
+    recordings,
+    sensor_std: np.ndarray,
+    first_round: int = 1,
+    solver: GaussNewton | None = None,
 ):
-    """Channel noise levels by maximum likelihood, (1), with the fit, warm-started from
-    ``state`` (every free parameter released; parameters held for identifiability are not
-    held again: holding one at its initial value moves the others away from the best
-    approximation); ``options``: the fit's ``FitOptions``.
+    """Channel noise levels by maximum likelihood, (1), with the fit ``run`` (``FitRun``) on
+    ``recordings``, warm-started from ``state`` (every free parameter released; parameters
+    held for identifiability are not held again: holding one at its initial value moves the
+    others away from the best approximation); levels floored at ``sensor_std`` [SI].
+
+    Rounds of a fit whose levels were estimated already go on from ``first_round`` (> 1:
+    none if its levels are settled at ``state``), ``state`` (its ``solver``) counting as
+    the converged round before it.
 
     A last round that stalls is rejected, as a trust region rejects a step: the fit is the
     last converged round's optimum (a real trajectory at its weights), marked by a
     ``REJECTED_ROUND_STAGE`` stage, with the levels reported as not settled. A round before
     the last that stalls is re-weighted from where it stopped.
 
-    Returns (problem, transcription, state, solver, rounds, settling), the problem weighted
-    by the levels of the last round; ``settling`` (``NoiseSettling``): the largest relative
-    change (in log) of a level over the last round, and whether it met ``NOISE_RTOL``.
+    Returns (run, state, solver, rounds, settling): the run of the problem weighted by the
+    levels of the last round (its options' ``channel_std`` those levels); ``settling``
+    (``NoiseSettling``): the largest relative change (in log) of a level over the last
+    round, and whether it met ``NOISE_RTOL``.
     """
-    sensor_std = problem.channel_std
-    state.active = np.ones(len(problem.free), dtype=bool)
-    gn = None
-    accepted = None
-    rounds = 0
-    for rounds in range(1, MAX_NOISE_ROUNDS + 1):
-        std = noise_levels(ms, state, sensor_std)
-        change = _change(std, problem.channel_std)
+    state.active = np.ones(len(run.problem.free), dtype=bool)
+    stages = run.stages
+    gn = solver
+    rounds = first_round - 1
+    accepted = None if solver is None else (run, state, solver, rounds)
+    for rounds in range(first_round, MAX_NOISE_ROUNDS + 1):
+        std = noise_levels(run.ms, state, sensor_std)
+        change = _change(std, run.problem.channel_std)
         if rounds > 1 and change <= NOISE_RTOL and stages[-1].converged:
             rounds -= 1
             break
-        problem, ms = _weighted(recordings, problem, std, options)
-        named = zip(problem.output_names, std, strict=True)
+        run = _weighted(recordings, run, std)
+        named = zip(run.problem.output_names, std, strict=True)
         label = f"noise round {rounds} (std {', '.join(f'{k} {v:.3g}' for k, v in named)})"
-        state, gn = warm_solve(ms, state, stages, counter, progress, label, options)
+        state, gn = warm_solve(run, state, label)
         if stages[-1].converged:
-            accepted = (problem, ms, state, gn, rounds)
+            accepted = (run, state, gn, rounds)
     else:
         if not stages[-1].converged and accepted is not None:
-            problem, ms, state, gn, kept = accepted
-            stages.append(_rejected_round_report(stages[-1], kept, ms, state))
-        change = _change(noise_levels(ms, state, sensor_std), problem.channel_std)
-    return problem, ms, state, gn, rounds, NoiseSettling(change, change <= NOISE_RTOL)
+            run, state, gn, kept = accepted
+            stages.append(_rejected_round_report(stages[-1], kept, run.ms, state))
+        change = _change(noise_levels(run.ms, state, sensor_std), run.problem.channel_std)
+    return run, state, gn, rounds, NoiseSettling(change, change <= NOISE_RTOL)
 
 
 def _change(std: np.ndarray, weight_std: np.ndarray) -> float:
@@ -153,12 +167,14 @@ def _change(std: np.ndarray, weight_std: np.ndarray) -> float:
     return float(np.max(np.abs(np.log(std / weight_std))))
 
 
-def _weighted(recordings, problem: FitProblem, std: np.ndarray, options):
-    """The problem and its transcription (``options``: the fit's ``FitOptions``) with the
-    channels weighed by ``std`` [SI]."""
-    weights = dict(zip(problem.output_names, np.asarray(std).tolist(), strict=True))
-    problem = build_problem(recordings, problem.initial, replace(options, channel_std=weights))
-    return problem, MultipleShooting(problem, transcription=options.transcription_options)
+def _weighted(recordings, run: FitRun, std: np.ndarray) -> FitRun:
+    """``run`` with its problem, transcription and options weighing the channels by ``std``
+    [SI]."""
+    weights = dict(zip(run.problem.output_names, np.asarray(std).tolist(), strict=True))
+    options = replace(run.options, channel_std=weights)
+    problem = build_problem(recordings, run.problem.initial, options)
+    ms = MultipleShooting(problem, transcription=options.transcription_options)
+    return replace(run, problem=problem, ms=ms, options=options)
 
 
 def noise_levels(ms, state: SolverState, sensor_std: np.ndarray) -> np.ndarray:
@@ -185,28 +201,28 @@ def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageR
     )
 
 
-def warm_solve(ms, start: SolverState, stages, counter, progress, label, options):
-    """Every window, exact continuity, from ``start``'s nodes and parameters, monotone (no
-    step may raise the merit: a warm start is kept, not thrown away by free steps). With
-    estimated levels a stall counts as converged only with its defects at ``defect_tol``
-    (or closed by simulation), see ``GaussNewton.run``; ``options``: the fit's
-    ``FitOptions``. Returns (state, solver)."""
-    ms = ms.uniform()
-    gn = GaussNewton(ms, progress, freeze_sloppy=True)
+def warm_solve(run: FitRun, start: SolverState, label: str):
+    """Every window of ``run``'s transcription, exact continuity, from ``start``'s nodes and
+    parameters, monotone (no step may raise the merit: a warm start is kept, not thrown
+    away by free steps), its stage ``label`` appended to ``run.stages``. With estimated
+    levels a stall counts as converged only with its defects at ``defect_tol`` (or closed
+    by simulation), see ``GaussNewton.run``. Returns (state, solver)."""
+    ms = run.ms.uniform()
+    gn = GaussNewton(ms, run.progress, freeze_sloppy=True)
     state = SolverState(start.nodes.copy(), start.theta.copy(), start.active.copy())
-    stages.append(
+    run.stages.append(
         exact_stage(
             gn,
             state,
             label,
-            options.solver_options,
+            run.options.solver_options,
             cost_rtol=WARM_COST_RTOL,
             radius=0.5,
             watchdog=False,
-            stall_defect_tol=options.defect_tol,
+            stall_defect_tol=run.options.defect_tol,
         )
     )
-    counter["evaluations"] += gn.evaluations
+    run.add_evaluations(gn.evaluations)
     return state, gn
 
 

@@ -54,13 +54,13 @@ def solve_from_replayed_rest(run: FitRun, best: Fitted, recordings) -> tuple[Fit
     solve was rejected."""
     options = replace(run.options, rest_start="replay")
     ms = MultipleShooting(run.problem, transcription=options.transcription_options)
+    replayed = replace(run, options=options, ms=ms)
     fresh, _ = ms.initial_nodes(run.problem.parameters(best.state.theta))
     nodes = best.state.nodes.copy()
     first = ms.first_window[[experiment.at_rest for experiment in run.problem.experiments]]
     nodes[first] = fresh[first]
     start = SolverState(nodes, best.state.theta.copy(), best.state.active.copy())
-    state, gn = warm_solve(ms, start, run.stages, run.counter, run.progress, STAGE, options)
-    replayed = replace(run, options=options, ms=ms)
+    state, gn = warm_solve(replayed, start, STAGE)
     ended = Fitted(state, gn, None, best.held)
     stalled = run.stages[-1]
     if not stalled.converged:
