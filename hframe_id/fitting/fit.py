@@ -28,6 +28,7 @@ from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import (
     Criterion,
     KnownPointsReport,
+    Simulations,
     judged_starts,
     known_points,
     replayed_starts,
@@ -86,7 +87,8 @@ def fit_recordings(
     options = (options or FitOptions()).for_model(initial.variant)
     _check_excitation(recordings, initial.variant)
     start = time.perf_counter()
-    screen = screen_start(recordings, initial, options)
+    simulations = Simulations()
+    screen = screen_start(recordings, initial, options, simulations)
     if options.starts > 1:
         result = _portfolio(recordings, screen.parameters, options, screen.criterion)
     else:
@@ -98,9 +100,8 @@ def fit_recordings(
     # an output-error fit. A prediction-error fit (continuity "none", for plants whose
     # simulation drifts) has no such criterion to compare by.
     if options.continuity == "exact":
-        result = _explaining_the_data(
-            recordings, _never_worse_than_known(recordings, initial, options, result, screen)
-        )
+        judged = _never_worse_than_known(recordings, initial, options, result, screen, simulations)
+        result = _explaining_the_data(recordings, judged, simulations)
     result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
 
@@ -123,12 +124,12 @@ def _check_excitation(recordings, variant: str) -> None:
         )
 
 
-def _explaining_the_data(recordings, result: FitResult) -> FitResult:
+def _explaining_the_data(recordings, result: FitResult, simulations=None) -> FitResult:
     """``result`` with its written file's criterion replayed as ``validate`` replays it
-    (``known_points.replayed_starts``: a record at rest from the replay's rest state) in its
-    known-points report, and failed if it succeeded without that replay simulating the
-    records better than the model-free prediction that nothing moves
-    (``known_points.held_criterion``: each channel held at its mean) by more than
+    (``known_points.replayed_starts``: a record at rest from the replay's rest state; runs
+    shared through ``simulations``) in its known-points report, and failed if it succeeded
+    without that replay simulating the records better than the model-free prediction that
+    nothing moves (``known_points.held_criterion``: each channel held at its mean) by more than
     ``LIKELIHOOD_RATIO_95`` (a failed fit says so of the point it ended at). A fit of records
     whose inputs do not drive what the outputs show (a red-team record with its voltages
     zeroed and its motion kept) ended "success", every parameter not identified; judged from
@@ -136,7 +137,7 @@ def _explaining_the_data(recordings, result: FitResult) -> FitResult:
     without input), as did a one-axis fit of current-limited pulses whose replay from rest
     was worse than nothing moving (-1,314 against -1,683:
     docs/studies/2026-11-26-replayed-verdict.md)."""
-    criterion = Criterion.of(result, recordings)
+    criterion = Criterion.of(result, recordings, simulations)
     replayed = criterion(result.parameters, (replayed_starts(result),))
     report = replace(result.diagnostics.known_points, replayed=replayed)
     result = result.with_diagnostics(known_points=report)
@@ -321,14 +322,17 @@ def _known_candidates(initial: ParameterSet, options: FitOptions, result, screen
     return list(known_candidates(initial, result.problem, options, regressed))
 
 
-def _never_worse_than_known(recordings, initial, options, result, screen) -> FitResult:
+def _never_worse_than_known(
+    recordings, initial, options, result, screen, simulations=None
+) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
     written file (a free-run simulation of each record, ``known_points.Criterion``): ended
     worse than one, it continues from the best of them; worse still, it fails saying so. A
     fit that failed continues from each point it knows other than its start (where it has
     already failed), best first, until a continuation succeeds no worse than the failed
-    fit's end and than the point it started from."""
-    criterion = Criterion.of(result, recordings)
+    fit's end and than the point it started from. ``simulations``: the fit's free runs
+    (``known_points.Simulations``), shared with the start screen."""
+    criterion = Criterion.of(result, recordings, simulations)
     # Every point, the fit too, from the fit's initial states, and for a failed fit also from
     # the replay's rest state, which ``validate`` starts the written file from
     # (``judged_starts``).

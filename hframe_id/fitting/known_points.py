@@ -103,6 +103,42 @@ class KnownPointsReport:
         return {"fit": self.fit, **self.compared}
 
 
+class Simulations:
+    """The free runs of one fit's training recordings, each simulated once: the start
+    screen, the known points and the replay of the written file judge the same parameter
+    sets from the same states (``make fit``: 8 simulations of 30 ms, 4 of them repeats).
+    Keyed by the parameter values and the initial states (None: from rest); for the
+    recordings of one ``fit_recordings`` call."""
+
+    def __init__(self) -> None:
+        self._runs: dict[tuple, list | None] = {}
+
+    def of(self, params: ParameterSet, recordings, initial_states) -> list | None:
+        """Per recording (``Dataset``, predicted outputs (N, n_y) [SI]), or None if a
+        simulation fails."""
+        key = (
+            params.variant,
+            tuple(sorted(params.values.items())),
+            tuple(None if x0 is None else np.asarray(x0).tobytes() for x0 in initial_states),
+        )
+        if key not in self._runs:
+            self._runs[key] = _simulated(params, recordings, initial_states)
+        return self._runs[key]
+
+
+def _simulated(params: ParameterSet, recordings, initial_states) -> list | None:
+    """Per recording (``Dataset``, predicted outputs), or None if a simulation fails."""
+    from hframe_id.validation.replay import simulate_channels
+
+    predictions = []
+    for recording, x0 in zip(recordings, initial_states, strict=True):
+        try:
+            predictions.append(simulate_channels(params, recording, x0))
+        except (HframeIdError, ArithmeticError, RuntimeError):
+            return None
+    return predictions
+
+
 def simulation_criterion(
     params: ParameterSet,
     recordings: Sequence[Recording],
@@ -110,6 +146,7 @@ def simulation_criterion(
     latency_samples: dict[str, int] | None = None,
     initial_states: Sequence[np.ndarray | None] | None = None,
     concentrated: bool = False,
+    simulations: Simulations | None = None,
 ) -> float:
     """C(p) of ``params`` on ``recordings`` (module docstring); ``channel_std`` [SI] per
     output; a channel lagging by ``latency_samples`` d is compared at sample k + d with the
@@ -119,16 +156,15 @@ def simulation_criterion(
     ln(SSR_j / N_j) over channels j (N_j valid samples, SSR_j their sum of squared
     residuals), which is what a fit that estimates its noise levels minimises, and whose
     differences are likelihood-ratio statistics as chi^2 / 2 differences are. inf if the
-    simulation fails or leaves the finite numbers."""
-    from hframe_id.validation.replay import simulate_channels
-
+    simulation fails or leaves the finite numbers. ``simulations``: the fit's free runs
+    (``Simulations``), reused where the same set was simulated from the same states."""
     starts = [None] * len(recordings) if initial_states is None else initial_states
-    predictions = []
-    for recording, x0 in zip(recordings, starts, strict=True):
-        try:
-            predictions.append(simulate_channels(params, recording, x0))
-        except (HframeIdError, ArithmeticError, RuntimeError):
-            return math.inf
+    if simulations is None:
+        predictions = _simulated(params, recordings, starts)
+    else:
+        predictions = simulations.of(params, recordings, starts)
+    if predictions is None:
+        return math.inf
     return _criterion(predictions, channel_std, latency_samples, concentrated)
 
 
@@ -197,9 +233,14 @@ def judged_starts(result) -> tuple[list[np.ndarray | None], ...]:
     """The initial states the points are judged from by a ``FitResult``'s ``Criterion``, as
     per-record lists: the fit's estimates; for a fit that failed also the replay's rest state
     (None) for each record at rest, with the fit's estimate for one that starts in motion
-    (module docstring). (Both for every fit doubled the simulations: ``make fit`` took
+    (module docstring); for a fit whose records at rest started at the replay's rest state,
+    that state (None) only. (Both for every fit doubled the simulations: ``make fit`` took
     1.58-1.83 s against 1.47-1.54 s, paired runs; a converged fit's estimated states are its
     optimum's.)"""
+    if result.options.rest_start == "replay":
+        # Its records at rest started where the replay starts them (``replayed_rest``): the
+        # same states, named as the replay names them (None), so the runs are shared.
+        return (replayed_starts(result),)
     own = list(result.initial_states)
     if result.success:
         return (own,)
@@ -229,16 +270,21 @@ class Criterion:
     channel_std: dict[str, float]
     latency_samples: dict[str, int]
     concentrated: bool
+    simulations: Simulations | None = None
 
     @classmethod
-    def of(cls, result, recordings: Sequence[Recording]) -> Criterion:
-        """The criterion of a ``FitResult``'s written file."""
+    def of(
+        cls, result, recordings: Sequence[Recording], simulations: Simulations | None = None
+    ) -> Criterion:
+        """The criterion of a ``FitResult``'s written file (``simulations``: the fit's free
+        runs, or None)."""
         noise = result.diagnostics.noise
         concentrated = noise is not None and noise.method == "estimated"
         std = dict(result.diagnostics.channel_std)
         if concentrated:
             std = {name: channel.sensor_std for name, channel in noise.channels.items()}
-        return cls(tuple(recordings), std, dict(result.options.latency_samples), concentrated)
+        latency = dict(result.options.latency_samples)
+        return cls(tuple(recordings), std, latency, concentrated, simulations)
 
     def __call__(self, params: ParameterSet, starts=None) -> float:
         """C(params): the lowest over ``starts``, alternative per-recording lists of initial
@@ -251,6 +297,7 @@ class Criterion:
                 self.latency_samples,
                 initial_states,
                 self.concentrated,
+                self.simulations,
             )
             for initial_states in (starts or (None,))
         )

@@ -35,7 +35,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hframe_id.fitting.equation_error import equation_error_start
-from hframe_id.fitting.known_points import reference_points, simulation_criterion
+from hframe_id.fitting.known_points import (
+    Simulations,
+    reference_points,
+    simulation_criterion,
+)
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, build_problem
@@ -49,16 +53,24 @@ EQUATION_ERROR = "the equation-error estimate"
 class RestCriterion:
     """The screen's judge (module docstring) of a parameter set on ``recordings``: every
     record simulated from rest, concentrated over the noise levels floored at the sensors'
-    ``channel_std`` [SI, by output], outputs lagging by ``latency_samples``; dimensionless,
-    concentrated chi^2 / 2 units, inf where a simulation fails."""
+    ``channel_std`` [SI, by output], outputs lagging by ``latency_samples``, the runs kept
+    in ``simulations`` (the fit's, or None); dimensionless, concentrated chi^2 / 2 units,
+    inf where a simulation fails."""
 
     recordings: tuple
     channel_std: dict[str, float]
     latency_samples: dict[str, int]
+    simulations: Simulations | None = None
 
     def __call__(self, params: ParameterSet) -> float:
         return simulation_criterion(
-            params, self.recordings, self.channel_std, self.latency_samples, None, True
+            params,
+            self.recordings,
+            self.channel_std,
+            self.latency_samples,
+            None,
+            True,
+            self.simulations,
         )
 
 
@@ -118,12 +130,15 @@ class ScreenedStart:
         )
 
 
-def screen_start(recordings, initial: ParameterSet, options: FitOptions) -> ScreenedStart:
+def screen_start(
+    recordings, initial: ParameterSet, options: FitOptions, simulations: Simulations | None = None
+) -> ScreenedStart:
     """The best of the user's start ``initial``, the equation-error estimate (with
     ``options.first_stage``), the model's reference files and ``options.known_points``, each
     with ``initial``'s fixed parameters and its free values clipped into the user's bounds,
     by the module's criterion on ``recordings``; ``initial`` unless another is better by more
-    than ``LIKELIHOOD_RATIO_95``, or where the screen does not run (module docstring)."""
+    than ``LIKELIHOOD_RATIO_95``, or where the screen does not run (module docstring); the
+    runs kept in ``simulations`` (the fit's, or None)."""
     skipped = ""
     if not options.screen_start:
         skipped = "off"
@@ -146,6 +161,7 @@ def screen_start(recordings, initial: ParameterSet, options: FitOptions) -> Scre
         tuple(recordings),
         dict(zip(problem.output_names, problem.channel_std, strict=True)),
         dict(problem.problem_options.latency_samples),
+        simulations,
     )
     criteria = {label: judge(params) for label, params in candidates}
     label = min(criteria, key=criteria.get)

@@ -82,3 +82,32 @@ def test_the_held_criterion_is_each_channel_held_at_its_mean(truth, steps):
     floors = dict.fromkeys(units, 1e-12)
     held = held_criterion(steps, floors, None, True, "hframe-8")
     assert simulation_criterion(truth, steps, floors, concentrated=True) < held
+
+
+def test_a_fits_free_runs_are_simulated_once(monkeypatch, table, steps):
+    """``Simulations``: a parameter set from the same initial states is simulated once,
+    whatever criterion judges it; another set, or other states, are simulated anew."""
+    from hframe_id.fitting import known_points
+
+    runs = []
+    real = known_points._simulated
+
+    def counted(params, recordings, initial_states):
+        runs.append(params)
+        return real(params, recordings, initial_states)
+
+    monkeypatch.setattr(known_points, "_simulated", counted)
+    std = {"phi1": 5.65e-6, "phi2": 5.65e-6, "x": 5e-6, "y": 5e-6}
+    simulations = known_points.Simulations()
+    plain = simulation_criterion(table, steps, std, simulations=simulations)
+    concentrated = simulation_criterion(table, steps, std, None, None, True, simulations)
+    assert len(runs) == 1
+    # The same numbers as without the memo.
+    assert plain == simulation_criterion(table, steps, std)
+    assert concentrated == simulation_criterion(table, steps, std, concentrated=True)
+    assert len(runs) == 3
+    other = table.replace_values(k_l=1.1 * table.values["k_l"])
+    simulation_criterion(other, steps, std, simulations=simulations)
+    x0 = [np.zeros(8)] * len(steps)
+    simulation_criterion(table, steps, std, None, x0, simulations=simulations)
+    assert len(runs) == 5

@@ -117,14 +117,18 @@ def test_a_fit_that_fails_from_its_start_continues_from_a_known_point(table, ste
 def test_a_failed_fit_is_also_judged_from_the_replays_rest_state(table, steps):
     """A converged fit's points are judged from its estimated initial states; a failed fit's
     also from what ``validate`` replays, None (the replay's rest state) for the steps, which
-    start at rest; a point's criterion is then the lower."""
+    start at rest; a point's criterion is then the lower. A fit whose last solve started its
+    records at rest from the replay's rest state is judged from there, named None."""
     from hframe_id.fitting.known_points import Criterion, judged_starts
 
     result = fit_recordings(steps[:1], table, FitOptions(free=("k_l",)))
     assert result.success and all(e.at_rest for e in result.problem.experiments)
-    (own,) = judged_starts(result)
+    assert result.options.rest_start == "replay"  # its last solve ran
+    assert judged_starts(result) == ([None],)
+    estimated = replace(result, options=replace(result.options, rest_start="rigid"))
+    (own,) = judged_starts(estimated)
     assert np.array_equal(own[0], result.initial_states[0])
-    failed = replace(result, success=False)
+    failed = replace(estimated, success=False)
     own, replay = judged_starts(failed)
     assert replay == [None]
     criterion = Criterion.of(result, steps[:1])

@@ -187,12 +187,14 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
     real_warm_solve = noise_rounds.warm_solve
     rounds = []
 
-    def warm_solve(ms, start, stages, counter, progress, label, options):
-        state, gn = real_warm_solve(ms, start, stages, counter, progress, label, options)
-        names = ms.problem.model.parameter_names
-        rounds.append(dict(zip(names, ms.problem.parameters(state.theta), strict=True)))
+    def warm_solve(run, start, label):
+        state, gn = real_warm_solve(run, start, label)
+        names = run.problem.model.parameter_names
+        rounds.append(dict(zip(names, run.problem.parameters(state.theta), strict=True)))
         if len(rounds) == stalled_round:
-            stages[-1] = replace(stages[-1], converged=False, message="stalled (by the test)")
+            run.stages[-1] = replace(
+                run.stages[-1], converged=False, message="stalled (by the test)"
+            )
         return state, gn
 
     # The rounds alone: no last solve from the replay's rest state after them

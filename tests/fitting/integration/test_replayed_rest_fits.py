@@ -48,9 +48,11 @@ def stalling_last_solve(monkeypatch):
     """The last solve run as it is, then reported as stopped unconverged."""
     real = replayed_rest.warm_solve
 
-    def stalling(ms, start, stages, *args):
-        state, gn = real(ms, start, stages, *args)
-        stages[-1] = replace(stages[-1], converged=False, message="not converged in 0 iterations")
+    def stalling(run, start, label):
+        state, gn = real(run, start, label)
+        run.stages[-1] = replace(
+            run.stages[-1], converged=False, message="not converged in 0 iterations"
+        )
         return state, gn
 
     monkeypatch.setattr(replayed_rest, "warm_solve", stalling)
