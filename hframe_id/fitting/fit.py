@@ -124,7 +124,9 @@ def _check_excitation(recordings, variant: str) -> None:
         )
 
 
-def _explaining_the_data(recordings, result: FitResult, simulations=None) -> FitResult:
+def _explaining_the_data(
+    recordings, result: FitResult, simulations: Simulations | None = None
+) -> FitResult:
     """``result`` with its written file's criterion replayed as ``validate`` replays it
     (``known_points.replayed_starts``: a record at rest from the replay's rest state; runs
     shared through ``simulations``) in its known-points report, and failed if it succeeded
@@ -323,7 +325,7 @@ def _known_candidates(initial: ParameterSet, options: FitOptions, result, screen
 
 
 def _never_worse_than_known(
-    recordings, initial, options, result, screen, simulations=None
+    recordings, initial, options, result, screen, simulations: Simulations | None = None
 ) -> FitResult:
     """The fit judged against the points it knows (``known_points``) by the criterion of its
     written file (a free-run simulation of each record, ``known_points.Criterion``): ended
