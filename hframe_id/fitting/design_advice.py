@@ -69,14 +69,14 @@ def identifying_designs(
         ratios = ratios[np.isfinite(ratios)]
         ratio = float(np.median(ratios)) if ratios.size else 1.0
     ratio *= stats.noise_scale
-    p = problem.parameters(state.theta)
+    fitted = problem.parameter_set(state.theta)
     present = {e.name.removesuffix(".mcap") for e in problem.experiments}
     candidates = []
     for design in standard_designs(problem.model.variant, problem.sample_period_s):
         if design.name in present:
             continue
         try:
-            info = _design_information(problem, ms, design, p, state.theta)
+            info = _design_information(problem, ms, design, fitted)
         except FitError:
             continue
         candidates.append((design.name, info))
@@ -101,18 +101,13 @@ def identifying_designs(
     return advice
 
 
-def _design_information(
-    problem: FitProblem, ms: MultipleShooting, design, p: np.ndarray, theta: np.ndarray
-):
+def _design_information(problem: FitProblem, ms: MultipleShooting, design, fitted):
     """Reduced information about the free log-parameters of one candidate experiment, on
-    the data's rig (``hframe_id.design.information``), in windows and threads of the
-    data's transcription ``ms``."""
+    the data's rig (``hframe_id.design.information``) at the ``fitted`` parameter set, in
+    windows and threads of the data's transcription ``ms``."""
     from hframe_id.design.information import experiment_information
 
     rec0 = problem.experiments[0].recording
-    fitted = problem.initial.replace_values(
-        **{n: float(v) for n, v in zip(problem.model.parameter_names, p, strict=True)}
-    )
     options = FitOptions(
         free=problem.free_names,
         channel_std=dict(zip(problem.output_names, problem.channel_std.tolist(), strict=True)),

@@ -61,12 +61,9 @@ def include_held_uncertainty(problem, recordings, state, result):
 def _linear_consider_variances(problem, recordings, state, result, held, prior) -> dict:
     """Per free parameter (name), the variance (in its theta units) the held parameters' priors add,
     linearised at the optimum: diag S P S^T (``consider.consider_covariance``)."""
-    names = problem.model.parameter_names
-    p = problem.parameters(state.theta)
-    values = {n: float(v) for n, v in zip(names, p, strict=True)}
     widened = build_problem(
         recordings,
-        problem.initial.replace_values(**values),
+        problem.parameter_set(state.theta),
         replace(result.options, free=result.free_names + tuple(held), fix=(), bounds={}),
     )
     ms = MultipleShooting(widened, transcription=result.options.transcription_options).uniform()

@@ -104,6 +104,14 @@ class FitProblem:
         )
         return p
 
+    def parameter_set(self, theta: np.ndarray) -> ParameterSet:
+        """The start's parameter set (``initial``) with every parameter at its value for
+        theta (``parameters``; the fixed ones as they are)."""
+        values = self.parameters(theta)
+        return self.initial.replace_values(
+            **{n: float(v) for n, v in zip(self.model.parameter_names, values, strict=True)}
+        )
+
     def theta_of(self, params: ParameterSet) -> np.ndarray:
         """(n_f,) theta of the free parameters' values in ``params`` (the inverse of
         ``parameters``)."""

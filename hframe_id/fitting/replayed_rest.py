@@ -99,14 +99,9 @@ def _replay_criterion(problem, recordings):
     ``theta``, under the problem's channel weights and latencies (``validate``'s replay)."""
     std = dict(zip(problem.output_names, problem.channel_std, strict=True))
     latency = dict(problem.problem_options.latency_samples)
-    names = problem.free_names
 
     def criterion(theta: np.ndarray) -> float:
-        p = problem.parameters(theta)
-        params = problem.initial.replace_values(
-            **{n: float(p[i]) for n, i in zip(names, problem.free, strict=True)}
-        )
-        return simulation_criterion(params, recordings, std, latency)
+        return simulation_criterion(problem.parameter_set(theta), recordings, std, latency)
 
     return criterion
 

@@ -181,7 +181,7 @@ def known_candidates(
     sets equal in their free values once, the first label kept."""
     points = [("the start", initial)]
     if regressed is not None:
-        points.append((EQUATION_ERROR, _with_free(initial, problem, problem.parameters(regressed))))
+        points.append((EQUATION_ERROR, problem.parameter_set(regressed)))
     points += reference_points(initial.variant, options.known_points)
     unique = {}
     for label, point in points:
@@ -197,14 +197,6 @@ def equation_error_theta(problem: FitProblem, options: FitOptions) -> np.ndarray
     ms.initial_nodes(problem.p_initial)  # the measured positions the regression needs
     return equation_error_start(
         problem, ms.measured_positions, ms.measured_usable, threads=ms.threads
-    )
-
-
-def _with_free(initial: ParameterSet, problem: FitProblem, p: np.ndarray) -> ParameterSet:
-    """``initial`` with ``problem``'s free parameters at their values in ``p`` (SI, every
-    parameter in model order)."""
-    return initial.replace_values(
-        **{n: float(p[i]) for n, i in zip(problem.free_names, problem.free, strict=True)}
     )
 
 

@@ -36,7 +36,7 @@ def _advise(monkeypatch, candidates, present=(), relative_std=(), relative_std_g
     problem = SimpleNamespace(
         free=(0, 1),
         free_names=("a", "b"),
-        parameters=lambda theta: np.exp(theta),
+        parameter_set=lambda theta: np.exp(theta),
         experiments=[SimpleNamespace(name=f"{n}.mcap") for n in present],
         model=SimpleNamespace(variant="hframe-8"),
         sample_period_s=1e-3,
@@ -50,7 +50,7 @@ def _advise(monkeypatch, candidates, present=(), relative_std=(), relative_std_g
     )
     designs = [Design(name, "hframe-8", np.zeros((1, 2)), "") for name in candidates]
 
-    def information(problem, ms, design, p, theta):
+    def information(problem, ms, design, fitted):
         b = candidates[design.name]
         if b is None:
             raise FitError("too few valid samples")
@@ -140,7 +140,7 @@ def test_a_design_repeating_the_datas_experiment_adds_about_the_datas_informatio
     jac, _, _ = GaussNewton(ms).condensed_jacobian(ev, nodes, np.ones(theta.size, dtype=bool))
     data = reduced_information(jac, ms.n_nuisance)
     design = Design("same", "hframe-8", recording.inputs, "the data's inputs")
-    candidate = design_advice._design_information(problem, ms, design, p, theta)
+    candidate = design_advice._design_information(problem, ms, design, problem.parameter_set(theta))
     scale = np.sqrt(np.outer(np.diag(data), np.diag(data)))
     difference = np.abs(candidate - data) / scale
     j = problem.free_names.index("J_M2")

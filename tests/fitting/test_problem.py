@@ -200,3 +200,20 @@ def test_the_problem_keeps_its_own_options_and_the_transcription_gets_its_own(ta
     assert given.transcription == resolved.transcription_options and given.m == 25
     default = FitOptions().for_model(table.variant).transcription_options
     assert MultipleShooting(problem).transcription == default
+
+
+def test_a_problems_parameter_set_holds_theta_and_the_fixed_values(table, steps):
+    """``FitProblem.parameter_set``: the start's set with the free parameters at theta's
+    values (SI) and the fixed ones bit for bit."""
+    from hframe_id.fitting import FitOptions
+    from hframe_id.fitting.problem import build_problem
+
+    problem = build_problem(steps, table, FitOptions(free=("k_l", "M_cart")))
+    theta = np.array([np.log(2.0), 0.0])
+    params = problem.parameter_set(theta)
+    assert params.values["k_l"] == pytest.approx(2 * table.values["k_l"], rel=1e-15)
+    assert params.values["M_cart"] == table.values["M_cart"]
+    assert {n: v for n, v in params.values.items() if n not in ("k_l", "M_cart")} == {
+        n: v for n, v in table.values.items() if n not in ("k_l", "M_cart")
+    }
+    assert params.variant == table.variant
