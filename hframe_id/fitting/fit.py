@@ -41,7 +41,6 @@ from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.start_screen import (
     Beginning,
-    RestCriterion,
     equation_error_theta,
     known_candidates,
     screen_start,
@@ -161,7 +160,7 @@ def _explaining_the_data(
 
 
 def _portfolio(
-    recordings, initial: ParameterSet, options: FitOptions, judge: RestCriterion | None = None
+    recordings, initial: ParameterSet, options: FitOptions, judge: Criterion | None = None
 ) -> FitResult:
     """The fit from ``initial`` (``judge``: as ``_fit_widening``) and from
     ``options.starts - 1`` seeded draws around it (``multistart``), one after another; the
@@ -189,7 +188,7 @@ def _portfolio(
 
 
 def _fit_widening(
-    recordings, initial: ParameterSet, options: FitOptions, judge: RestCriterion | None = None
+    recordings, initial: ParameterSet, options: FitOptions, judge: Criterion | None = None
 ) -> FitResult:
     """The fit within the default box, repeated from ``initial`` while it ends on it
     (``BOX_WIDENINGS`` times): once a nonnegative parameter ends on its log-scale lower bound

@@ -35,11 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hframe_id.fitting.equation_error import equation_error_start
-from hframe_id.fitting.known_points import (
-    Simulations,
-    reference_points,
-    simulation_criterion,
-)
+from hframe_id.fitting.known_points import Criterion, Simulations, reference_points
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, build_problem
@@ -50,41 +46,16 @@ EQUATION_ERROR = "the equation-error estimate"
 
 
 @dataclass(frozen=True)
-class RestCriterion:
-    """The screen's judge (module docstring) of a parameter set on ``recordings``: every
-    record simulated from rest, concentrated over the noise levels floored at the sensors'
-    ``channel_std`` [SI, by output], outputs lagging by ``latency_samples``, the runs kept
-    in ``simulations`` (the fit's, or None); dimensionless, concentrated chi^2 / 2 units,
-    inf where a simulation fails."""
-
-    recordings: tuple
-    channel_std: dict[str, float]
-    latency_samples: dict[str, int]
-    simulations: Simulations | None = None
-
-    def __call__(self, params: ParameterSet) -> float:
-        return simulation_criterion(
-            params,
-            self.recordings,
-            self.channel_std,
-            self.latency_samples,
-            None,
-            True,
-            self.simulations,
-        )
-
-
-@dataclass(frozen=True)
 class Beginning:
     """Where a fit in the default box begins (``fit._fit_widening``): ``parameters`` and
-    their ``criterion`` (``RestCriterion``; None until judged); ``statement``, for the
-    fit's message, says why it is not the start ("" for the start)."""
+    their ``criterion`` (the screen's judge, module docstring; None until judged);
+    ``statement``, for the fit's message, says why it is not the start ("" for the start)."""
 
     parameters: ParameterSet
     criterion: float | None = None
     statement: str = ""
 
-    def or_better(self, end: ParameterSet, judge: RestCriterion) -> Beginning:
+    def or_better(self, end: ParameterSet, judge: Criterion) -> Beginning:
         """This beginning, or ``end`` (where a fit ended on its box) if ``judge`` finds it
         better by more than ``LIKELIHOOD_RATIO_95``: the widened fit begins from the best
         point it knows, as the first one did."""
@@ -106,7 +77,8 @@ class ScreenedStart:
     user's); ``criteria``, the screen's criterion of every point judged, by label (the
     start's first; dimensionless, concentrated chi^2 / 2 units; inf where the simulation
     failed); ``candidates``, the (label, parameter set) judged, sets equal in their free
-    values once; ``criterion``, the judge (``RestCriterion``). All empty (None) when the
+    values once; ``criterion``, the judge (``known_points.Criterion``, concentrated, from
+    rest). All empty (None) when the
     screen did not run, ``skipped`` saying why."""
 
     label: str
@@ -114,7 +86,7 @@ class ScreenedStart:
     criteria: dict[str, float]
     candidates: tuple[tuple[str, ParameterSet], ...] = ()
     skipped: str = ""
-    criterion: RestCriterion | None = None
+    criterion: Criterion | None = None
 
     @property
     def moved(self) -> bool:
@@ -157,11 +129,12 @@ def screen_start(
     # heavy plant began from Table 4.1 so and ended 15 % apart in motor-angle rms).
     regressed = equation_error_theta(problem, options) if options.first_stage else None
     candidates = known_candidates(initial, problem, options, regressed)
-    judge = RestCriterion(
+    judge = Criterion(
         tuple(recordings),
         dict(zip(problem.output_names, problem.channel_std, strict=True)),
         dict(problem.problem_options.latency_samples),
-        simulations,
+        concentrated=True,
+        simulations=simulations,
     )
     criteria = {label: judge(params) for label, params in candidates}
     label = min(criteria, key=criteria.get)
