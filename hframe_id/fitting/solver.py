@@ -351,14 +351,17 @@ class GaussNewton(CondensedModel):
         while walk.radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
             key = (self.node_damping, self.prox_scale)
             if damping_used != key:
-                linearized = (
-                    self._linearize(ev, state.nodes, free)
-                    if penalty is None
-                    else self._linearize_penalty(ev, state.nodes, free, penalty)
-                )
-                h_red, g_red, complete = self._with_prior(
-                    ev, free, linearized, exact=penalty is None
-                )
+                # Sensitivities that overflow are the verdict below (``overflowed``), not a
+                # numpy warning printed on the user's terminal.
+                with np.errstate(over="ignore", invalid="ignore"):
+                    linearized = (
+                        self._linearize(ev, state.nodes, free)
+                        if penalty is None
+                        else self._linearize_penalty(ev, state.nodes, free, penalty)
+                    )
+                    h_red, g_red, complete = self._with_prior(
+                        ev, free, linearized, exact=penalty is None
+                    )
                 damping_used = key
             out.overflowed = not (np.all(np.isfinite(h_red)) and np.all(np.isfinite(g_red)))
             if out.overflowed:

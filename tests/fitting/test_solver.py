@@ -1,6 +1,18 @@
-"""The condensed Gauss-Newton solver's merit function (``fitting.solver``)."""
+"""The condensed Gauss-Newton solver's merit function and its overflow verdict
+(``fitting.solver``)."""
 
-from hframe_id.fitting.solver import MERIT_RHO, _penalty_parameter
+import dataclasses
+import warnings
+
+import numpy as np
+
+from hframe_id.fitting.solver import (
+    MERIT_RHO,
+    GaussNewton,
+    SolverState,
+    _penalty_parameter,
+    _Walk,
+)
 
 
 def test_penalty_parameter_makes_every_full_step_predict_a_decrease():
@@ -8,3 +20,22 @@ def test_penalty_parameter_makes_every_full_step_predict_a_decrease():
         mu = _penalty_parameter(1.0, change, l1)
         assert mu >= 1.0
         assert mu * l1 - change >= MERIT_RHO * mu * l1 - 1e-9 * abs(change)
+
+
+def test_overflowing_sensitivities_stop_the_step_without_numpy_warnings(shooting_setup):
+    """Sensitivities too large to square (a parameter run far off) make the linearisation
+    non-finite: the step says so (``overflowed``, which ends the stage with that reason)
+    and nothing is printed (the fit's command line showed every numpy RuntimeWarning)."""
+    problem, ms, nodes, _ = shooting_setup
+    theta = np.zeros(len(problem.free))
+    gn = GaussNewton(ms)
+    gn.set_smoothing(problem.smoothing)
+    ev = ms.evaluate(nodes, theta, problem.smoothing)
+    huge = dataclasses.replace(ev, jac_theta=ev.jac_theta * 1e300)
+    state = SolverState(nodes, theta, np.ones(len(theta), dtype=bool), evaluation=huge)
+    walk = _Walk(ms, gn.links, None, 0.5, False)
+    walk.best = (walk.merit(huge, nodes), nodes, theta, huge)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        trial = gn._trial(walk, state, problem.smoothing, 1)
+    assert trial.overflowed and not trial.accepted
