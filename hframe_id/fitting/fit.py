@@ -360,8 +360,10 @@ def _never_worse_than_known(
         report = replace(report, continued={**report.continued, point.label: continued})
         if continued <= min(point.criterion, own) + LIKELIHOOD_RATIO_95:
             why = "failed" if not result.success else "ended worse"
+            # The fit reported is the continued one, so the report's ``fit`` is its
+            # criterion (it was the first fit's: not what the written file replays).
             return replace(
-                again.with_diagnostics(known_points=report),
+                again.with_diagnostics(known_points=replace(report, fit=continued)),
                 message=f"{again.message}; continued from {point.label}, where the first fit {why}",
             )
     result = result.with_diagnostics(known_points=report)
