@@ -13,14 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
 from hframe_id.fitting.statistics import Block
 
-#: Marquardt damping of the node blocks (relative to their diagonal): keeps the solve
-#: regular where a window's data do not determine its node state (e.g. speed at rest).
-NODE_DAMPING = 1e-6
-#: Proximal weight on node velocity steps (continuity stages), see ``set_smoothing``.
-PROX_WEIGHT = 1.0
 #: Floor of the Marquardt scaling, relative to the largest diagonal entry of the block.
 DIAG_FLOOR = 1e-9
 
@@ -46,17 +42,17 @@ class CondensedModel:
         self.links = shooting.linked.copy()
         self.prox_unit = np.zeros(shooting.nx)
         self.prox_scale = 1.0
-        self.node_damping = NODE_DAMPING
+        self.node_damping = GaussNewtonSettings.node_damping
 
-    def set_smoothing(self, smoothing, proximal: bool = True):
+    def set_smoothing(self, smoothing, weight: float = GaussNewtonSettings.proximal_weight):
         """Proximal weight on node velocity steps: a step of one smoothing velocity costs as
         much as one noise-sized residual. Near rest the dynamics change on that scale (the
         Coulomb law turns within a few v_s), and the speed at rest is nearly collinear with
-        the position, so without it Gauss-Newton takes long, useless velocity steps."""
+        the position, so without it Gauss-Newton takes long, useless velocity steps.
+        ``weight``: noise-sized residuals per smoothing velocity of step (0: none)."""
         vs = np.array(
             [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.ms.model.coordinates]
         )
-        weight = PROX_WEIGHT if proximal else 0.0
         self.prox_unit = np.concatenate([np.zeros(self.ms.nq), weight / vs**2])
         self.prox_scale = 1.0
 

@@ -56,6 +56,12 @@ class FitRun:
         """Count ``evaluations`` more model evaluations (a stage's solver's, or probes)."""
         self.counter["evaluations"] += evaluations
 
+    def solver(self, ms: MultipleShooting, freeze_sloppy: bool = False) -> GaussNewton:
+        """A Gauss-Newton iteration on ``ms`` (this run's transcription or a part of it)
+        with the options' tuning (``FitOptions.gauss_newton``), reporting to ``progress``;
+        ``freeze_sloppy``: parameters the data do not determine are held still."""
+        return GaussNewton(ms, self.progress, freeze_sloppy, self.options.gauss_newton)
+
     def statistics(self, solver: GaussNewton, state: SolverState) -> Statistics:
         """The statistics at ``state`` by the ``FitOptions.uncertainty`` method, from the
         condensed Jacobian of ``solver``'s transcription."""

@@ -220,7 +220,7 @@ def _start(run: FitRun, prepass: bool) -> np.ndarray:
         # poorer regression (docs/fitting.md, "One-axis").
         active0 = np.ones(n_free, dtype=bool)
         trials = [
-            estimate_states(ms, nodes, velocity, th, active0, [], run.progress)
+            estimate_states(run.solver(ms), nodes, velocity, th, active0, [])
             for th in (theta, regressed)
         ]
         costs = [merit for _, merit in trials]

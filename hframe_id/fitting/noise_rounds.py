@@ -208,7 +208,7 @@ def warm_solve(run: FitRun, start: SolverState, label: str):
     levels a stall counts as converged only with its defects at ``defect_tol`` (or closed
     by simulation), see ``GaussNewton.run``. Returns (state, solver)."""
     ms = run.ms.uniform()
-    gn = GaussNewton(ms, run.progress, freeze_sloppy=True)
+    gn = run.solver(ms, freeze_sloppy=True)
     state = SolverState(start.nodes.copy(), start.theta.copy(), start.active.copy())
     run.stages.append(
         exact_stage(

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from hframe_id.errors import OptionError, shown
+from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
+from hframe_id.fitting.option_checks import as_tuple, names, one_of, positive
 from hframe_id.fitting.solvers import check_solver_name
 
 #: Prior relative std of a table value held in a fit (``FitOptions.consider``): the spread
@@ -52,39 +54,6 @@ class FitProgress:
     message: str = ""
 
 
-def _positive(name: str, value: Any, integer: bool = False) -> None:
-    kind = int if integer else (int, float)
-    if isinstance(value, bool) or not isinstance(value, kind):
-        raise OptionError(
-            f"{name} must be a {'whole ' if integer else ''}number, got {shown(value)}"
-        )
-    if not (math.isfinite(value) and value > 0):
-        raise OptionError(f"{name} must be > 0, got {shown(value)}")
-
-
-def _one_of(name: str, value: Any, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise OptionError(f"{name} must be one of {', '.join(choices)}, got {shown(value)}")
-
-
-def _names(name: str, value: Any) -> tuple[str, ...]:
-    """``value`` as a tuple of non-empty names (a single string is refused)."""
-    names = None if isinstance(value, str) else _as_tuple(value)
-    if names is None or not all(isinstance(v, str) and v for v in names):
-        raise OptionError(
-            f"{name} must be a sequence of parameter names or patterns, got {shown(value)}"
-        )
-    return names
-
-
-def _as_tuple(value: Any) -> tuple | None:
-    """``value``'s items as a tuple, None if it has none (a number)."""
-    try:
-        return tuple(value)
-    except TypeError:
-        return None
-
-
 def _check_consider(consider: Any, consider_method: Any) -> None:
     """``consider``: None or a mapping of names to relative stds > 0 [1];
     ``consider_method`` one of ``CONSIDER_METHODS``. Read by the problem (``"prior"``: the
@@ -95,8 +64,8 @@ def _check_consider(consider: Any, consider_method: Any) -> None:
                 f"consider must map parameter names to relative std, got {shown(consider)}"
             )
         for name, value in consider.items():
-            _positive(f"consider[{shown(name)}]", value)
-    _one_of("consider_method", consider_method, CONSIDER_METHODS)
+            positive(f"consider[{shown(name)}]", value)
+    one_of("consider_method", consider_method, CONSIDER_METHODS)
 
 
 def _default_threads() -> int:
@@ -131,17 +100,17 @@ class ProblemOptions:
         self._check_channels()
         self._check_smoothing()
         _check_consider(self.consider, self.consider_method)
-        _one_of("initial_state", self.initial_state, INITIAL_STATES)
+        one_of("initial_state", self.initial_state, INITIAL_STATES)
 
     def _check_names(self) -> None:
         """``free`` (None: the model's default set, else not empty), ``fix`` and
         ``zero_reachable``: sequences of non-empty names, stored as tuples."""
         if self.free is not None:
-            object.__setattr__(self, "free", _names("free", self.free))
+            object.__setattr__(self, "free", names("free", self.free))
             if not self.free:
                 raise OptionError("free must name at least one parameter (or be None for defaults)")
-        object.__setattr__(self, "fix", _names("fix", self.fix))
-        object.__setattr__(self, "zero_reachable", _names("zero_reachable", self.zero_reachable))
+        object.__setattr__(self, "fix", names("fix", self.fix))
+        object.__setattr__(self, "zero_reachable", names("zero_reachable", self.zero_reachable))
 
     def _check_bounds(self) -> None:
         """``bounds``: a mapping of names to two numbers, low < high [SI]; ``bound_factor``
@@ -161,7 +130,7 @@ class ProblemOptions:
                 raise OptionError(
                     f"bounds[{shown(name)}] must satisfy low < high, got {shown(pair)}"
                 )
-        _positive("bound_factor", self.bound_factor)
+        positive("bound_factor", self.bound_factor)
         if self.bound_factor <= 1:
             raise OptionError(f"bound_factor must be > 1, got {shown(self.bound_factor)}")
 
@@ -173,7 +142,7 @@ class ProblemOptions:
                 f"channel_std must map output names to numbers, got {shown(self.channel_std)}"
             )
         for name, value in self.channel_std.items():
-            _positive(f"channel_std[{shown(name)}]", value)
+            positive(f"channel_std[{shown(name)}]", value)
         if not isinstance(self.latency_samples, Mapping):
             raise OptionError(
                 "latency_samples must map output names to samples, "
@@ -190,13 +159,13 @@ class ProblemOptions:
         """``smoothing``: None or two velocities > 0 [m/s, rad/s], stored as floats."""
         if self.smoothing is None:
             return
-        pair = None if isinstance(self.smoothing, str) else _as_tuple(self.smoothing)
+        pair = None if isinstance(self.smoothing, str) else as_tuple(self.smoothing)
         if pair is None or len(pair) != 2:
             raise OptionError(
                 f"smoothing must be (linear m/s, angular rad/s), got {shown(self.smoothing)}"
             )
         for value in pair:
-            _positive("smoothing", value)
+            positive("smoothing", value)
         object.__setattr__(self, "smoothing", tuple(float(v) for v in pair))
 
 
@@ -223,31 +192,37 @@ class TranscriptionOptions:
             raise OptionError(
                 f"shooting interval must be >= 1 sample, got {shown(self.shooting_interval)}"
             )
-        _one_of("continuity", self.continuity, CONTINUITY)
-        _one_of("rest_start", self.rest_start, REST_STARTS)
-        _positive("substep_safety", self.substep_safety)
+        one_of("continuity", self.continuity, CONTINUITY)
+        one_of("rest_start", self.rest_start, REST_STARTS)
+        positive("substep_safety", self.substep_safety)
         if self.substep_safety < 1:
             raise OptionError(f"substep_safety must be >= 1, got {shown(self.substep_safety)}")
-        _positive("max_substeps", self.max_substeps, integer=True)
-        _positive("threads", self.threads, integer=True)
+        positive("max_substeps", self.max_substeps, integer=True)
+        positive("threads", self.threads, integer=True)
 
 
 @dataclass(frozen=True)
 class SolverOptions:
     """How the all-window stages are solved: which solver (a name ``fitting.solvers``
-    knows, built in or registered), iterations and tolerances (finite, > 0), each checked on
-    construction. The fields mean what ``FitOptions``' do, with the same defaults."""
+    knows, built in or registered), iterations and tolerances (finite, > 0), and the
+    Gauss-Newton iteration's tuning, each checked on construction. The fields mean what
+    ``FitOptions``' do, with the same defaults."""
 
     solver: str = "gauss-newton"
     max_iterations: int = 150
     step_tol: float = 1e-6
     defect_tol: float = 1e-2
+    gauss_newton: GaussNewtonSettings = GaussNewtonSettings()
 
     def __post_init__(self) -> None:
         check_solver_name(self.solver)
-        _positive("max_iterations", self.max_iterations, integer=True)
-        _positive("step_tol", self.step_tol)
-        _positive("defect_tol", self.defect_tol)
+        if not isinstance(self.gauss_newton, GaussNewtonSettings):
+            raise OptionError(
+                f"gauss_newton must be GaussNewtonSettings, got {type(self.gauss_newton).__name__}"
+            )
+        positive("max_iterations", self.max_iterations, integer=True)
+        positive("step_tol", self.step_tol)
+        positive("defect_tol", self.defect_tol)
 
 
 @dataclass(frozen=True)
@@ -262,11 +237,11 @@ class StatisticsOptions:
     identifiability_threshold: float = 0.1
 
     def __post_init__(self) -> None:
-        _one_of("uncertainty", self.uncertainty, UNCERTAINTY_METHODS)
+        one_of("uncertainty", self.uncertainty, UNCERTAINTY_METHODS)
         if not (isinstance(self.confidence, float) and 0 < self.confidence < 1):
             raise OptionError(f"confidence must be in (0, 1), got {shown(self.confidence)}")
         _check_consider(self.consider, self.consider_method)
-        _positive("identifiability_threshold", self.identifiability_threshold)
+        positive("identifiability_threshold", self.identifiability_threshold)
 
 
 #: The links of the chain, each handed its part of ``FitOptions``.
@@ -369,6 +344,9 @@ class FitOptions:
         (continuity as a penalty), then release the parameters; if that attempt does not
         converge, fit again from the measured nodes (docs/fitting.md, "One-axis").
     max_iterations : Gauss-Newton iterations per stage.
+    gauss_newton : the Gauss-Newton iteration's tuning (trust region, watchdog, stall and
+        give-up rules: ``hframe_id.fitting.gauss_newton_settings.GaussNewtonSettings``),
+        for every Gauss-Newton stage of the fit; the defaults are the measured ones.
     step_tol : converged when no free parameter changes by more than this relative amount
         (and the continuity defects are below ``defect_tol``). 1e-7 is four orders below
         the 0.1 % scale of anything a test or a user compares.
@@ -436,6 +414,7 @@ class FitOptions:
     first_stage: bool = True
     state_prepass: bool = True
     max_iterations: int = SolverOptions.max_iterations
+    gauss_newton: GaussNewtonSettings = SolverOptions.gauss_newton
     step_tol: float = SolverOptions.step_tol
     defect_tol: float = SolverOptions.defect_tol
     identifiability_threshold: float = StatisticsOptions.identifiability_threshold
@@ -483,7 +462,7 @@ class FitOptions:
         if not schedule:
             raise OptionError("smoothing_schedule needs at least one factor (1.0)")
         for value in schedule:
-            _positive("smoothing_schedule factor", value)
+            positive("smoothing_schedule factor", value)
         if any(b > a for a, b in zip(schedule, schedule[1:], strict=False)):
             raise OptionError(f"smoothing_schedule must not increase, got {shown(schedule)}")
         if schedule[-1] != 1:
@@ -496,10 +475,10 @@ class FitOptions:
         """The strategy's own settings: ``noise`` one of ``NOISE_METHODS``, ``max_misfit``
         None or > 0 [noise stds], ``starts`` a whole number > 0, ``start_seed`` an integer
         >= 0, ``verbose`` 0, 1 or 2, ``progress`` None or callable."""
-        _one_of("noise", self.noise, NOISE_METHODS)
+        one_of("noise", self.noise, NOISE_METHODS)
         if self.max_misfit is not None:
-            _positive("max_misfit", self.max_misfit)
-        _positive("starts", self.starts, integer=True)
+            positive("max_misfit", self.max_misfit)
+        positive("starts", self.starts, integer=True)
         if (
             isinstance(self.start_seed, bool)
             or not isinstance(self.start_seed, int)
@@ -562,7 +541,8 @@ class FitOptions:
 
     @property
     def solver_options(self) -> SolverOptions:
-        """The solver's part: which solver, iteration limit, step and defect tolerances."""
+        """The solver's part: which solver, iteration limit, step and defect tolerances,
+        the Gauss-Newton iteration's tuning."""
         return _part(self, SolverOptions)
 
     @property
@@ -592,6 +572,7 @@ class FitOptions:
             "first_stage": bool(self.first_stage),
             "state_prepass": bool(self.state_prepass),
             "max_iterations": int(self.max_iterations),
+            "gauss_newton": self.gauss_newton.changed() or "default",
             "step_tol": float(self.step_tol),
             "defect_tol": float(self.defect_tol),
             "identifiability_threshold": float(self.identifiability_threshold),

@@ -65,7 +65,7 @@ def solve(
     theta = theta.copy()
     nodes = run.nodes
     if prepass:
-        nodes, _ = estimate_states(ms, nodes, velocity, theta, active, run.stages, run.progress)
+        nodes, _ = estimate_states(run.solver(ms), nodes, velocity, theta, active, run.stages)
     measured = nodes
     nodes = nodes.copy()
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
@@ -96,8 +96,8 @@ def solve(
         # discontinuous trajectory, and the noise rounds would estimate the noise from it
         # (realistic one-axis plant 2: defects of 79 sensor std, noise 33 sensor std where
         # continuous trajectories are at 0.2-3 rad) and stall (docs/fitting.md).
-        nodes, _ = estimate_states(ms, nodes, velocity, theta, active, run.stages, run.progress)
-    gn = GaussNewton(ms, run.progress, freeze_sloppy=True)
+        nodes, _ = estimate_states(run.solver(ms), nodes, velocity, theta, active, run.stages)
+    gn = run.solver(ms, freeze_sloppy=True)
     if mismatch:
         state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
         _defer(run, ms, state, moving_rms)
@@ -131,7 +131,7 @@ def _moving_window_stages(
     schedule = options.smoothing_schedule
     nodes = nodes.copy()
     sub = ms.subset(moving)
-    gn_sub = GaussNewton(sub, run.progress)
+    gn_sub = run.solver(sub)
     for use_penalty in (False, True):
         # Fast path: exact continuity straight from the start. If that fails (a poor
         # start), the fallback first relaxes continuity into a penalty.

@@ -16,45 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hframe_id.fitting.condensed import NODE_DAMPING, CondensedModel
+from hframe_id.fitting.condensed import CondensedModel
+from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.options import FitProgress
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
-
-#: Trust region on the log-parameters (2-norm): start, largest, smallest before giving up.
-MAX_RADIUS = 4.0
-MIN_RADIUS = 1e-9
-MAX_NODE_DAMPING = 1e8
-#: The proximal weight adapts like a Levenberg-Marquardt damping within these factors.
-MIN_PROX_SCALE = 1e-3
-MAX_PROX_SCALE = 1e4
-#: Watchdog of the continuity stages.
-WATCHDOG_FACTOR = 10.0
-WATCHDOG_PATIENCE = 4
-WATCHDOG_MIN_RADIUS = 1e-2
-WATCHDOG_REVERTS = 2
-#: A stalled exact stage is accepted as converged if simulating from the initial states (exact
-#: continuity) costs at most this much more than the lifted iterate (chi^2 / 2 units).
-CLOSE_COST_TOL = 1.0
-#: ... and so is a stall with every continuity defect below this (noise std units).
-STALL_DEFECT_TOL = 2.0
-#: ... provided the fit is at the noise level (residual rms at most this many noise std):
-#: a stall far from a good fit is a failure, whatever the defects.
-STALL_NOISE_RATIO = 1.5
-#: Continuity stages accept their first steps unconditionally: they close the defects left
-#: by the previous stage, which raises the cost (and the merit) before it falls.
-FREE_STEPS = 2
-#: Fast paths (``give_up`` set) stop when the best merit has not fallen by GIVE_UP_DECREASE
-#: (relative) over ``give_up`` iterations while the residual rms is above GIVE_UP_NOISE_RATIO
-#: noise std: far from the data the exact stage can hover for many iterations where its
-#: penalty fallback fits in a fraction of the time (docs/fitting.md, "The stages", 2).
-GIVE_UP_DECREASE = 0.2
-GIVE_UP_NOISE_RATIO = 10.0
-#: Iterations over which an exact stage with ``cost_rtol`` judges the cost decrease.
-COST_WINDOW = 10
-#: Share of the removed l1 penalty a full exact-stage step must predict as merit decrease.
-MERIT_RHO = 0.1
-#: Textbook relative std (of log p) above which a parameter is not moved in an iteration.
-SLOPPY_STD = 0.5
 
 
 @dataclass
@@ -119,27 +84,27 @@ def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.
     return step(hi), False
 
 
-def _penalty_parameter(mu: float, change: float, l1: float) -> float:
+def _penalty_parameter(mu: float, change: float, l1: float, rho: float) -> float:
     """The l1 penalty parameter for a step that closes the linearised defects.
 
     The step changes the model cost by ``change`` (chi^2 / 2 units) and removes the defects
     ``l1`` = |defects|_1 (noise units). It must predict a merit decrease of at least
-    ``MERIT_RHO`` times the penalty removed (Nocedal & Wright, eq. 18.36): mu is raised to
-    ``change / ((1 - MERIT_RHO) l1)`` where it is smaller, and never lowered.
+    ``rho`` times the penalty removed (Nocedal & Wright, eq. 18.36): mu is raised to
+    ``change / ((1 - rho) l1)`` where it is smaller, and never lowered.
     """
-    if l1 <= 0 or change <= (1 - MERIT_RHO) * mu * l1:
+    if l1 <= 0 or change <= (1 - rho) * mu * l1:
         return mu
-    return change / ((1 - MERIT_RHO) * l1)
+    return change / ((1 - rho) * l1)
 
 
-def _determined(h_red: np.ndarray) -> np.ndarray:
+def _determined(h_red: np.ndarray, sloppy_std: float) -> np.ndarray:
     """Parameters whose textbook relative std (from the reduced information, residuals in
-    noise units) is at most SLOPPY_STD."""
+    noise units) is at most ``sloppy_std``."""
     if h_red.size == 0:
         return np.ones(0, dtype=bool)
     d = np.sqrt(np.maximum(np.diag(h_red), 1e-300))
     cov = np.linalg.pinv(h_red / np.outer(d, d), rcond=1e-12, hermitian=True) / np.outer(d, d)
-    return np.sqrt(np.maximum(np.diag(cov), 0.0)) <= SLOPPY_STD
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)) <= sloppy_std
 
 
 @dataclass
@@ -193,8 +158,16 @@ class _Trial:
 class GaussNewton(CondensedModel):
     """Iterates the stages of the lifted problem (its linearisation: ``CondensedModel``)."""
 
-    def __init__(self, shooting: MultipleShooting, progress=None, freeze_sloppy: bool = False):
+    def __init__(
+        self,
+        shooting: MultipleShooting,
+        progress=None,
+        freeze_sloppy: bool = False,
+        settings: GaussNewtonSettings | None = None,
+    ):
         super().__init__(shooting)
+        #: The iteration's tuning (default: ``GaussNewtonSettings()``).
+        self.settings = settings or GaussNewtonSettings()
         self.progress = progress
         self.evaluations = 0
         #: Hold undetermined parameters still (final stages, where the iterate is near an
@@ -209,13 +182,13 @@ class GaussNewton(CondensedModel):
         """At a stall with small defects left (typically velocities at rest, where closing
         them is nonlinear), replace the nodes by one simulation per experiment from its
         initial state. If that continuous trajectory fits as well as the lifted iterate
-        (cost within ``CLOSE_COST_TOL``, in units of chi^2 / 2), it is the solution."""
+        (cost within ``settings.close_cost_tol``, in units of chi^2 / 2), it is the solution."""
         ms = self.ms
         known = np.zeros(ms.n_windows, dtype=bool)
         known[np.flatnonzero(np.r_[True, ~self.links])] = True
         nodes = ms.fill_nodes(state.nodes, known, state.theta, smoothing)
         trial = self._evaluate(state, nodes, state.theta, smoothing)
-        if not np.isfinite(trial.cost) or trial.cost > merit_now + CLOSE_COST_TOL:
+        if not np.isfinite(trial.cost) or trial.cost > merit_now + self.settings.close_cost_tol:
             return None
         state.nodes = nodes
         state.evaluation = trial
@@ -236,7 +209,7 @@ class GaussNewton(CondensedModel):
         penalty: float | None = None,
         watchdog: bool = True,
         give_up: int | None = None,
-        stall_defect_tol: float = STALL_DEFECT_TOL,
+        stall_defect_tol: float | None = None,
     ) -> StageReport:
         """Iterate one stage until converged; updates ``state`` in place.
 
@@ -248,10 +221,11 @@ class GaussNewton(CondensedModel):
         changed no free parameter by more than ``step_tol`` (relative), and the continuity
         defects are below ``defect_tol`` (noise units). A stage may also stop once an
         iteration lowers the cost by less than ``cost_rtol`` (relative; exact stages: on
-        average over ``COST_WINDOW`` iterations, with the defects below ``defect_tol``).
+        average over ``settings.cost_window`` iterations, with the defects below ``defect_tol``).
         With ``give_up``, a stage far from the noise level that stops making progress ends
         unconverged early (for fast paths that have a fallback). A stall at the noise level
-        with every defect below ``stall_defect_tol`` is accepted too, unless a simulation from
+        with every defect below ``stall_defect_tol`` (default ``settings.stall_defect_tol``)
+        is accepted too, unless a simulation from
         the initial states closes them as well (``_close_by_simulation``); where the noise
         levels are estimated from the residuals (model error) the caller passes
         ``defect_tol`` (no such acceptance): defects of 2 estimated std let a discontinuous
@@ -260,8 +234,11 @@ class GaussNewton(CondensedModel):
         """
         start = time.perf_counter()
         ms = self.ms
-        self.node_damping = NODE_DAMPING
-        self.set_smoothing(smoothing, proximal=True)
+        settings = self.settings
+        if stall_defect_tol is None:
+            stall_defect_tol = settings.stall_defect_tol
+        self.node_damping = settings.node_damping
+        self.set_smoothing(smoothing, settings.proximal_weight)
         self.links = ms.linked.copy()
         ev = self._evaluate(state, state.nodes, state.theta, smoothing)
         state.evaluation = ev
@@ -295,14 +272,14 @@ class GaussNewton(CondensedModel):
             walk.best_history.append(walk.best[0])
             if give_up is not None and self._gives_up(walk, ev, give_up):
                 message = (
-                    f"not converging: merit down by less than {GIVE_UP_DECREASE:.0%} in "
+                    f"not converging: merit down by less than {settings.give_up_decrease:.0%} in "
                     f"{give_up} iterations, residual rms {ms.residual_rms(ev.cost):.3g} noise std"
                 )
                 break
             walk.costs.append(ev.cost)
-            # Exact stages judge the decrease over the last COST_WINDOW iterations (a crawl
+            # Exact stages judge the decrease over the last ``cost_window`` iterations (a crawl
             # of tiny monotone steps along a valley lowers the cost a little every time).
-            span = 1 if penalty is not None else COST_WINDOW
+            span = 1 if penalty is not None else settings.cost_window
             costs = walk.costs
             if (
                 cost_rtol > 0
@@ -340,7 +317,7 @@ class GaussNewton(CondensedModel):
         """One iteration's step: the Gauss-Newton step within the trust region and the
         bounds, the region (and the node damping) shrunk until the merit accepts a step or
         the region collapses. Raises the l1 penalty parameter where a step needs it."""
-        ms = self.ms
+        ms, settings = self.ms, self.settings
         lo, hi = self.problem.theta_lower, self.problem.theta_upper
         ev = state.evaluation
         penalty = walk.penalty
@@ -348,7 +325,7 @@ class GaussNewton(CondensedModel):
         free = state.active.copy()
         index = np.flatnonzero(free)
         damping_used = None
-        while walk.radius >= MIN_RADIUS and self.node_damping <= MAX_NODE_DAMPING:
+        while walk.radius >= settings.min_radius and self.node_damping <= settings.max_node_damping:
             key = (self.node_damping, self.prox_scale)
             if damping_used != key:
                 # Sensitivities that overflow are the verdict below (``overflowed``), not a
@@ -376,7 +353,7 @@ class GaussNewton(CondensedModel):
             nodes_new = state.nodes + dnodes
             if penalty is None:
                 l1 = float(np.sum(np.abs(ms.defects(ev, state.nodes, self.links))))
-                raised = _penalty_parameter(walk.mu, change, l1)
+                raised = _penalty_parameter(walk.mu, change, l1, settings.merit_rho)
                 if raised > walk.mu:
                     walk.mu = raised
                     out.current = walk.merit(ev, state.nodes)
@@ -405,10 +382,10 @@ class GaussNewton(CondensedModel):
                     ratio, d = 0.5, alpha * d
             if walk.monotone:
                 ok = np.isfinite(new) and ratio > 1e-4
-            elif iterations <= FREE_STEPS:
+            elif iterations <= settings.free_steps:
                 ok = bool(np.isfinite(new))  # closes the defects left by the last stage
             else:
-                ok = np.isfinite(new) and new < WATCHDOG_FACTOR * walk.best[0]
+                ok = np.isfinite(new) and new < settings.watchdog_factor * walk.best[0]
             if ok:
                 out.accepted = True
                 out.step = float(np.max(np.abs(d), initial=0.0))
@@ -421,11 +398,15 @@ class GaussNewton(CondensedModel):
         """(step in the free log-parameters, whether the trust region left it whole).
 
         Parameters the data do not determine at all (textbook relative std above
-        SLOPPY_STD) are not moved: along such directions Gauss-Newton steps are arbitrary
-        and can take the model somewhere stiff and ill-conditioned. The identifiability step
-        later holds them at their initial value. Parameters at a bound whose step points
-        outward are held, the rest clipped into the bounds."""
-        sub = _determined(h_red) if self.freeze_sloppy else np.ones(len(theta_f), dtype=bool)
+        ``settings.sloppy_std``) are not moved: along such directions Gauss-Newton steps are
+        arbitrary and can take the model somewhere stiff and ill-conditioned. The
+        identifiability step later holds them at their initial value. Parameters at a bound
+        whose step points outward are held, the rest clipped into the bounds."""
+        sub = (
+            _determined(h_red, self.settings.sloppy_std)
+            if self.freeze_sloppy
+            else np.ones(len(theta_f), dtype=bool)
+        )
         for _ in range(len(theta_f) + 1):
             d_sub, full_step = _trust_region_step(h_red[np.ix_(sub, sub)], g_red[sub], radius)
             d = np.zeros(len(theta_f))
@@ -441,25 +422,25 @@ class GaussNewton(CondensedModel):
     def _adapt_region(self, walk: _Walk, ratio: float, new: float, length: float, n_free: int):
         """The trust region and the node damping after a step of ``length`` whose merit
         ratio (actual / predicted decrease) is ``ratio``."""
+        settings = self.settings
         if not np.isfinite(new) or ratio < 0.25:
             if n_free:
                 # (Node-only stages: nothing for the region to limit; the node damping
                 # below does the shortening.)
-                walk.radius = (
-                    0.25 * max(length, MIN_RADIUS) if np.isfinite(new) else 0.1 * walk.radius
-                )
+                shrunk = 0.25 * max(length, settings.min_radius)
+                walk.radius = shrunk if np.isfinite(new) else 0.1 * walk.radius
             self.node_damping *= 10.0
-            self.prox_scale = min(self.prox_scale * 10.0, MAX_PROX_SCALE)
+            self.prox_scale = min(self.prox_scale * 10.0, settings.max_prox_scale)
         elif ratio > 0.75:
-            self.node_damping = max(NODE_DAMPING, self.node_damping / 10.0)
-            self.prox_scale = max(self.prox_scale / 4.0, MIN_PROX_SCALE)
+            self.node_damping = max(settings.node_damping, self.node_damping / 10.0)
+            self.prox_scale = max(self.prox_scale / 4.0, settings.min_prox_scale)
             if length >= 0.9 * walk.radius:
-                walk.radius = min(2 * walk.radius, MAX_RADIUS)
+                walk.radius = min(2 * walk.radius, settings.max_radius)
         if not walk.monotone:
             # The watchdog guards the exact stages; the trust region only keeps single
             # steps sane, so it must not shrink to nothing over noise-level merit changes
             # near the optimum.
-            walk.radius = max(walk.radius, WATCHDOG_MIN_RADIUS)
+            walk.radius = max(walk.radius, settings.watchdog_min_radius)
 
     def _shortened(self, walk: _Walk, state: SolverState, dnodes, dtheta, current, smoothing):
         """The whole step (nodes and parameters) shortened to 1/2, 1/4, 1/8 until the merit
@@ -482,25 +463,25 @@ class GaussNewton(CondensedModel):
     def _accept(self, walk: _Walk, state: SolverState, trial: _Trial, iterations: int):
         """Move to the accepted step and keep the watchdog's books (returning to the best
         iterate, with a smaller region, once it has not improved for a while)."""
-        ms = self.ms
+        ms, settings = self.ms, self.settings
         state.nodes, state.theta, ev = trial.nodes, trial.theta, trial.evaluation
         state.evaluation = ev
         state.velocity_hint = ev.states[:, :, ms.nq :]
         value = walk.merit(ev, state.nodes)
-        if (not walk.monotone and iterations <= FREE_STEPS) or value < walk.best[0]:
+        if (not walk.monotone and iterations <= settings.free_steps) or value < walk.best[0]:
             walk.best = (value, state.nodes, state.theta, ev)
             walk.since_best = 0
         else:
             walk.since_best += 1
-        if walk.since_best >= WATCHDOG_PATIENCE:
+        if walk.since_best >= settings.watchdog_patience:
             _, state.nodes, state.theta, ev = walk.best
             state.evaluation = ev
             state.velocity_hint = ev.states[:, :, ms.nq :]
-            walk.radius = max(0.1 * trial.step, WATCHDOG_MIN_RADIUS)
+            walk.radius = max(0.1 * trial.step, settings.watchdog_min_radius)
             walk.reverts += 1
             # A second return to the same best point would start a cycle: from then on the
             # stage is a monotone trust-region method.
-            walk.monotone = walk.reverts >= WATCHDOG_REVERTS
+            walk.monotone = walk.reverts >= settings.watchdog_reverts
             walk.since_best = 0
             trial.full_step = False
 
@@ -512,7 +493,7 @@ class GaussNewton(CondensedModel):
         ms = self.ms
         ev = state.evaluation
         max_defect = float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0))
-        at_noise_level = ms.residual_rms(ev.cost) <= STALL_NOISE_RATIO
+        at_noise_level = ms.residual_rms(ev.cost) <= self.settings.stall_noise_ratio
         at_tolerance = abs(walk.predicted) <= 1e-10 * max(ev.cost, 1.0) and max_defect <= defect_tol
         exact = walk.penalty is None
         converged = at_tolerance or (exact and max_defect <= stall_defect_tol and at_noise_level)
@@ -522,7 +503,7 @@ class GaussNewton(CondensedModel):
             if converged
             else "stalled: no step decreases the cost"
         )
-        # Defects above the tolerance (a stall accepted below STALL_DEFECT_TOL, or not
+        # Defects above the tolerance (a stall accepted below ``stall_defect_tol``, or not
         # accepted) are closed by simulation where that fits as well: a real trajectory, not
         # one continuous only to within the noise.
         if not at_tolerance and exact:
@@ -537,18 +518,19 @@ class GaussNewton(CondensedModel):
                     message = (
                         "converged: no step decreases the cost; continuity closed by "
                         "simulating from the initial states (cost within "
-                        f"{CLOSE_COST_TOL:g} of the multiple-shooting optimum)"
+                        f"{self.settings.close_cost_tol:g} of the multiple-shooting optimum)"
                     )
         return converged, message, ev
 
     def _gives_up(self, walk: _Walk, ev: Evaluation, give_up: int) -> bool:
         """A fast path far from the noise level whose best merit has fallen by less than
-        ``GIVE_UP_DECREASE`` over the last ``give_up`` iterations."""
+        ``settings.give_up_decrease`` over the last ``give_up`` iterations."""
+        settings = self.settings
         history = walk.best_history
         return (
             len(history) > give_up
-            and walk.best[0] > (1 - GIVE_UP_DECREASE) * history[-1 - give_up]
-            and self.ms.residual_rms(ev.cost) > GIVE_UP_NOISE_RATIO
+            and walk.best[0] > (1 - settings.give_up_decrease) * history[-1 - give_up]
+            and self.ms.residual_rms(ev.cost) > settings.give_up_noise_ratio
         )
 
     def _report_progress(self, stage, smoothing, iteration, ev, step, max_defect, walk):

@@ -69,15 +69,16 @@ def penalty_stage(
     )
 
 
-def estimate_states(ms, nodes, velocity, theta, active, stages, progress):
-    """State-estimation pre-pass: the node states with the parameters held at ``theta``.
+def estimate_states(gn: GaussNewton, nodes, velocity, theta, active, stages):
+    """State-estimation pre-pass: the node states of ``gn``'s transcription with the
+    parameters held at ``theta``; the stage's report is appended to ``stages``.
 
     The nodes from the data put unmeasured coordinates (and lasers out of range) on the
     rigid motion (belts unstretched); the continuity defects that leaves make the first
     Gauss-Newton steps in the parameters large (0.3-0.4 in log p even at the truth). Here
     continuity is a penalty and only the nodes move; the parameters are released after.
     """
-    gn = GaussNewton(ms, progress)
+    ms = gn.ms
     state = SolverState(nodes.copy(), theta.copy(), np.zeros_like(active), velocity_hint=velocity)
     stages.append(
         gn.run(

@@ -5,21 +5,18 @@ import dataclasses
 import warnings
 
 import numpy as np
+import pytest
 
-from hframe_id.fitting.solver import (
-    MERIT_RHO,
-    GaussNewton,
-    SolverState,
-    _penalty_parameter,
-    _Walk,
-)
+from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
+from hframe_id.fitting.solver import GaussNewton, SolverState, _penalty_parameter, _Walk
 
 
-def test_penalty_parameter_makes_every_full_step_predict_a_decrease():
+@pytest.mark.parametrize("rho", [GaussNewtonSettings.merit_rho, 0.5])
+def test_penalty_parameter_makes_every_full_step_predict_a_decrease(rho):
     for change, l1 in ((10.0, 1.0), (1e9, 3.0), (-5.0, 2.0), (0.5, 4.0)):
-        mu = _penalty_parameter(1.0, change, l1)
+        mu = _penalty_parameter(1.0, change, l1, rho)
         assert mu >= 1.0
-        assert mu * l1 - change >= MERIT_RHO * mu * l1 - 1e-9 * abs(change)
+        assert mu * l1 - change >= rho * mu * l1 - 1e-9 * abs(change)
 
 
 def test_overflowing_sensitivities_stop_the_step_without_numpy_warnings(shooting_setup):

@@ -99,7 +99,7 @@ def test_state_estimation_moves_the_nodes_only(exact_shooting, measured_start):
     theta = np.zeros(3)
     stages = []
     estimated, merit = estimate_states(
-        ms, nodes, velocity, theta, np.ones(3, dtype=bool), stages, None
+        GaussNewton(ms), nodes, velocity, theta, np.ones(3, dtype=bool), stages
     )
     assert np.array_equal(nodes, given) and np.array_equal(theta, np.zeros(3))
     assert [s.name for s in stages] == ["state estimation"]
@@ -119,10 +119,11 @@ def test_state_estimation_holds_the_parameters(exact_shooting, measured_start):
     optimum theta = 0, which the test above bounds."""
     _, ms, _ = exact_shooting
     nodes, velocity = measured_start
+    gn = GaussNewton(ms)
     _, held = estimate_states(
-        ms, nodes, velocity, np.array([0.02, -0.02, 0.02]), np.ones(3, dtype=bool), [], None
+        gn, nodes, velocity, np.array([0.02, -0.02, 0.02]), np.ones(3, dtype=bool), []
     )
-    _, free = estimate_states(ms, nodes, velocity, np.zeros(3), np.ones(3, dtype=bool), [], None)
+    _, free = estimate_states(gn, nodes, velocity, np.zeros(3), np.ones(3, dtype=bool), [])
     assert held > 100 * free
 
 

@@ -1,0 +1,53 @@
+"""One-line checks of option values, shared by the option classes of the fitter's links.
+
+Each raises :class:`~hframe_id.errors.OptionError` naming the option and the value given.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from hframe_id.errors import OptionError, shown
+
+
+def positive(name: str, value: Any, integer: bool = False) -> None:
+    """``value`` is a finite number > 0 (a whole number with ``integer``; never a bool)."""
+    kind = int if integer else (int, float)
+    if isinstance(value, bool) or not isinstance(value, kind):
+        raise OptionError(
+            f"{name} must be a {'whole ' if integer else ''}number, got {shown(value)}"
+        )
+    if not (math.isfinite(value) and value > 0):
+        raise OptionError(f"{name} must be > 0, got {shown(value)}")
+
+
+def fraction(name: str, value: Any) -> None:
+    """``value`` is a number in the open interval (0, 1)."""
+    positive(name, value)
+    if value >= 1:
+        raise OptionError(f"{name} must be < 1, got {shown(value)}")
+
+
+def one_of(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    """``value`` is one of ``choices``."""
+    if value not in choices:
+        raise OptionError(f"{name} must be one of {', '.join(choices)}, got {shown(value)}")
+
+
+def names(name: str, value: Any) -> tuple[str, ...]:
+    """``value`` as a tuple of non-empty names (a single string is refused)."""
+    items = None if isinstance(value, str) else as_tuple(value)
+    if items is None or not all(isinstance(v, str) and v for v in items):
+        raise OptionError(
+            f"{name} must be a sequence of parameter names or patterns, got {shown(value)}"
+        )
+    return items
+
+
+def as_tuple(value: Any) -> tuple | None:
+    """``value``'s items as a tuple, None if it has none (a number)."""
+    try:
+        return tuple(value)
+    except TypeError:
+        return None
