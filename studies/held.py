@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.options import CONSIDER_METHODS
+from hframe_id.fitting.link_options import CONSIDER_METHODS
 from hframe_id.models import declaration
 from hframe_id.parameters import load_parameter_file
 from studies.recovery import random_truth, simulate_set

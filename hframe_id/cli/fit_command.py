@@ -17,13 +17,8 @@ from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import check_dir, check_input
 from hframe_id.errors import FitError, OptionError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
-from hframe_id.fitting.options import (
-    CONSIDER_METHODS,
-    CONTINUITY,
-    NOISE_METHODS,
-    UNCERTAINTY_METHODS,
-    FitOptions,
-)
+from hframe_id.fitting.link_options import CONSIDER_METHODS, CONTINUITY, UNCERTAINTY_METHODS
+from hframe_id.fitting.options import NOISE_METHODS, FitOptions
 from hframe_id.fitting.solvers import solver_names
 from hframe_id.resources import datasets_dir
 

@@ -26,7 +26,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hframe_id.errors import FitError
-from hframe_id.fitting.options import FitOptions, TranscriptionOptions
+from hframe_id.fitting.link_options import TranscriptionOptions
+from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton

@@ -14,8 +14,10 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from hframe_id.fitting.fit import fit_recordings
+    from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
     from hframe_id.fitting.options import FitOptions, FitProgress
     from hframe_id.fitting.result import FitResult, ParameterEstimate
+    from hframe_id.fitting.strategy_settings import StrategySettings
 
 _HOMES = {
     "FitResult": "hframe_id.fitting.result",
@@ -23,9 +25,19 @@ _HOMES = {
     "fit_recordings": "hframe_id.fitting.fit",
     "FitOptions": "hframe_id.fitting.options",
     "FitProgress": "hframe_id.fitting.options",
+    "GaussNewtonSettings": "hframe_id.fitting.gauss_newton_settings",
+    "StrategySettings": "hframe_id.fitting.strategy_settings",
 }
 
-__all__ = ["FitOptions", "FitProgress", "FitResult", "ParameterEstimate", "fit_recordings"]
+__all__ = [
+    "FitOptions",
+    "FitProgress",
+    "FitResult",
+    "GaussNewtonSettings",
+    "ParameterEstimate",
+    "StrategySettings",
+    "fit_recordings",
+]
 
 
 def __getattr__(name: str):

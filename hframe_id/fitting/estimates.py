@@ -6,8 +6,9 @@ import math
 import time
 from dataclasses import replace
 
+from hframe_id.fitting.link_options import StatisticsOptions
 from hframe_id.fitting.noise_rounds import channel_rms
-from hframe_id.fitting.options import FitOptions, StatisticsOptions
+from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.result import FitDiagnostics, FitResult, ParameterEstimate, spread
 from hframe_id.parameters import ParameterSet
 

@@ -49,13 +49,6 @@ from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
 
-#: Times the default box (``FitOptions.bound_factor``) of a fit that ends on it is widened
-#: (factor squared: 10, 100, 1e4 by default), besides friction opened to zero once; still on
-#: it after that, the fit fails saying so. Four decades either side of Table 4.2 hold the
-#: envelope of issue 25 (masses and stiffness within 0.4-2.5 x; friction, which spans
-#: 0.01-10 x and zero, reaches zero after the first opening).
-BOX_WIDENINGS = 2
-
 
 def fit_recordings(
     recordings: list[Recording], initial: ParameterSet, options: FitOptions | None = None
@@ -191,12 +184,12 @@ def _fit_widening(
     recordings, initial: ParameterSet, options: FitOptions, judge: Criterion | None = None
 ) -> FitResult:
     """The fit within the default box, repeated from ``initial`` while it ends on it
-    (``BOX_WIDENINGS`` times): once a nonnegative parameter ends on its log-scale lower bound
-    every free nonnegative one reaches 0 (``FitOptions.zero_reachable``: friction terms trade
-    against each other, one at a time would take a fit per term), any other on the box widens
-    it (bound factor squared, ``BOX_WIDENINGS`` times: opening friction to zero does not use
-    one up; before, test plant 1034's M_cart got x/÷100, not 1e4, because friction had been
-    opened first). Still on the box after that, a failure saying so.
+    (``StrategySettings.box_widenings`` times): once a nonnegative parameter ends on its
+    log-scale lower bound every free nonnegative one reaches 0 (``FitOptions.zero_reachable``:
+    friction terms trade against each other, one at a time would take a fit per term), any other
+    on the box widens it (bound factor squared, ``box_widenings`` times: opening friction to
+    zero does not use one up; before, test plant 1034's M_cart got x/÷100, not 1e4, because
+    friction had been opened first). Still on the box after that, a failure saying so.
 
     ``judge``: ``initial`` is the start screen's point (``start_screen``, its criterion);
     a widened fit then begins from where the last one ended on the box if the judge finds
@@ -207,6 +200,7 @@ def _fit_widening(
     2 V steps began from the equation-error estimate, ended with B_M1 on its box at the
     rig's value, and the refits from there ended at a wrong optimum, docs/studies/.)"""
     squarings = 0
+    widenings = options.strategy.box_widenings
     may_widen = True
     begin = Beginning(initial)
     while True:
@@ -218,14 +212,14 @@ def _fit_widening(
             break
         if judge:
             begin = begin.or_better(result.parameters, judge)
-        widened = _widened(options, result, boxed, squarings < BOX_WIDENINGS)
+        widened = _widened(options, result, boxed, squarings < widenings)
         # Nothing left to open: the fit again, whole (a fit that may widen stops before
         # its noise rounds once it ends on the box), to be judged.
         opened = (widened.bound_factor, widened.zero_reachable)
         may_widen = opened != (options.bound_factor, options.zero_reachable)
         squarings += widened.bound_factor != options.bound_factor
         options = widened
-        if may_widen and squarings >= BOX_WIDENINGS:
+        if may_widen and squarings >= widenings:
             may_widen = _zero_pending(result, options)
     if begin.parameters is not initial:
         result = _started_from(result, initial)

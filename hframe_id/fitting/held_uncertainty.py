@@ -9,9 +9,7 @@ import numpy as np
 
 from hframe_id.fitting.consider import Consider, consider_covariance
 from hframe_id.fitting.estimates import ended_at_bound
-from hframe_id.fitting.options import (
-    HELD_PRIOR_RELATIVE_STD,
-)
+from hframe_id.fitting.link_options import HELD_PRIOR_RELATIVE_STD
 from hframe_id.fitting.problem import build_problem, consider_priors
 from hframe_id.fitting.result import spread
 from hframe_id.fitting.shooting import MultipleShooting

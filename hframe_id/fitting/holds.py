@@ -16,13 +16,6 @@ import numpy as np
 from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.solver import GaussNewton, SolverState
 
-#: Residual rms (noise std) above which an unconverged fit is not worth holding parameters.
-MISFIT = 1.5
-
-
-#: Relative standard error above which parameters are held together, not one at a time.
-HOPELESS_STD = 1.0
-
 
 def hold_unidentified(
     run: FitRun,
@@ -32,15 +25,18 @@ def hold_unidentified(
     """``fitted`` with the free parameters whose relative standard error exceeds the
     identifiability threshold held at their initial value, the worst first, each time
     solved again by ``resolve(theta, active) -> (state, solver)`` (log-parameters, which
-    are free), until every parameter left is identified."""
-    problem = run.problem
+    are free), until every parameter left is identified. Parameters whose error is above
+    ``StrategySettings.hopeless_std`` are held with the worst; an unconverged fit above
+    ``hold_misfit`` noise std holds nothing."""
+    problem, strategy = run.problem, run.options.strategy
     state, gn, stats = fitted.state, fitted.solver, fitted.statistics
     held = dict(fitted.held)
     for _ in range(len(problem.free)):
         # Also when the stage did not converge, if the fit is at the noise level: a sloppy
         # direction (a parameter the data hardly determine) is the usual reason, and holding
         # it lets the rest converge. Far from a fit, error estimates mean nothing: fail.
-        if not run.stages[-1].converged and run.ms.residual_rms(state.evaluation.cost) > MISFIT:
+        misfit = run.ms.residual_rms(state.evaluation.cost)
+        if not run.stages[-1].converged and misfit > strategy.hold_misfit:
             break
         active_idx = np.flatnonzero(state.active)
         # A parameter with a prior (``FitProblem.prior_weight``) is never held: the prior
@@ -51,7 +47,7 @@ def hold_unidentified(
             break
         # The worst first (fixing one of a collinear pair can identify the other), together
         # with every parameter the data plainly do not determine (relative std > 100 %).
-        hold = {worst} | set(np.flatnonzero(judged > HOPELESS_STD).tolist())
+        hold = {worst} | set(np.flatnonzero(judged > strategy.hopeless_std).tolist())
         active = state.active.copy()
         theta = state.theta.copy()
         for k in sorted(hold):

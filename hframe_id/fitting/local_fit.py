@@ -39,7 +39,7 @@ from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.held_uncertainty import include_held_uncertainty
 from hframe_id.fitting.holds import hold_unidentified
-from hframe_id.fitting.noise_rounds import MISMATCH_RMS, estimate_noise, noise_report
+from hframe_id.fitting.noise_rounds import estimate_noise, noise_report
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.output_error import DEFERRED_STAGE, solve
 from hframe_id.fitting.problem import build_problem
@@ -90,7 +90,9 @@ def fit_in_box(
     sensor_std = run.problem.channel_std.copy()
     rounds = 0
     settling = None
-    mismatch = deferred or run.ms.residual_rms(best.state.evaluation.cost) > MISMATCH_RMS
+    mismatch = (
+        deferred or run.ms.residual_rms(best.state.evaluation.cost) > options.strategy.mismatch_rms
+    )
     if options.noise == "estimate" or (options.noise == "auto" and mismatch):
         # The fit is now of the problem weighted by the estimated levels, and says so.
         run, state, gn, rounds, settling = estimate_noise(run, best.state, recordings, sensor_std)
@@ -188,7 +190,8 @@ def _attempt(run: FitRun, prepass: bool) -> Fitted:
     active = np.ones(len(run.problem.free), dtype=bool)
     state, gn = solve(run, theta, active, prepass, defer_on_mismatch=True)
     fitted = Fitted(state, gn, run.statistics(gn, state))
-    if run.options.noise != "sensor" and run.ms.residual_rms(state.evaluation.cost) > MISMATCH_RMS:
+    mismatch_rms = run.options.strategy.mismatch_rms
+    if run.options.noise != "sensor" and run.ms.residual_rms(state.evaluation.cost) > mismatch_rms:
         # Model mismatch: identifiability is decided after the noise levels are estimated.
         return fitted
 
@@ -220,7 +223,7 @@ def _start(run: FitRun, prepass: bool) -> np.ndarray:
         # poorer regression (docs/fitting.md, "One-axis").
         active0 = np.ones(n_free, dtype=bool)
         trials = [
-            estimate_states(run.solver(ms), nodes, velocity, th, active0, [])
+            estimate_states(run.solver(ms), nodes, velocity, th, active0, [], run.options.strategy)
             for th in (theta, regressed)
         ]
         costs = [merit for _, merit in trials]

@@ -13,13 +13,13 @@ majorises (1) up to a constant: a step that lowers it lowers L (majorise-minimis
 levels are floored at the sensors' std (a channel fitted below its sensor's noise is
 overfitted, not better known).
 
-Each round is a full solve at fixed levels, warm-started from the last; the rounds stop once
-no level at a round's end differs from the levels it was solved at by more than
-``NOISE_RTOL``. (Re-setting the levels within a round's solve, whenever one moved by 5 %, took
-the worn plant of issue 25 to the same optimum in 2 rounds, 125 s, against 5 rounds, 385 s,
-but let a channel that fits badly lower its own weight as it goes: dev plant 10 ended with
-phi levels of 0.5 rad, a wrong fit called a success, where solving each round at fixed levels
-does not. Measured 2026-11-26, docs/studies/.)
+Each round is a full solve at fixed levels, warm-started from the last; the rounds stop once no
+level at a round's end differs from the levels it was solved at by more than
+``StrategySettings.noise_rtol``. (Re-setting the levels within a round's solve, whenever one moved
+by 5 %, took the worn plant of issue 25 to the same optimum in 2 rounds, 125 s, against 5 rounds,
+385 s, but let a channel that fits badly lower its own weight as it goes: dev plant 10 ended with
+phi levels of 0.5 rad, a wrong fit called a success, where solving each round at fixed levels does
+not. Measured 2026-11-26, docs/studies/.)
 """
 
 from __future__ import annotations
@@ -38,23 +38,6 @@ from hframe_id.fitting.stages import exact_stage
 if TYPE_CHECKING:  # fit_run imports this module (through estimates)
     from hframe_id.fitting.fit_run import FitRun
 
-#: Noise estimation (``FitOptions.noise``): a sensor-weighted fit whose residual rms exceeds
-#: this many sensor std does not fit at the noise level (matched sim-rig fits end at
-#: 1.0-1.3): its levels are estimated (with ``FitOptions.noise`` "auto").
-MISMATCH_RMS = 3.0
-#: The noise levels count as a fixed point once no channel's std moves by more than this
-#: (relative, in log) from the weights a round converged under: 5 % of a std is a 10 %
-#: change of a channel's weight in the cost, below what moves an estimate by a standard error.
-NOISE_RTOL = 0.05
-#: Rounds at most. Settling is slow where a level first overshoots: two realistic steps with
-#: six parameters free (tests/fitting/test_fit_mismatch.py) moved phi1's std 0.0062, 0.0039,
-#: 0.0024, 0.0018, 0.0016, 0.0015 rad under once-per-round re-weighting, 7 rounds.
-MAX_NOISE_ROUNDS = 10
-#: Warm-started rounds also stop once an iteration lowers the cost by less than this
-#: (relative): at their costs (~N / 2 ~ 1e4, N valid samples) that is ~0.01 in chi^2 / 2
-#: units, 1 % of the statistical resolution (1 unit). Without it the monotone trust region
-#: can crawl under model mismatch (the l1 merit is not smooth where defects change sign).
-WARM_COST_RTOL = 1e-6
 REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
 
 
@@ -76,7 +59,7 @@ class ChannelNoise:
 class NoiseSettling:
     """How far estimated noise levels were from their fixed point when the rounds ended:
     ``change`` the largest relative change (in log, dimensionless) of a level over the last
-    round; ``settled`` whether it was within ``NOISE_RTOL``."""
+    round; ``settled`` whether it was within ``StrategySettings.noise_rtol``."""
 
     change: float
     settled: bool
@@ -135,17 +118,18 @@ def estimate_noise(
     Returns (run, state, solver, rounds, settling): the run of the problem weighted by the
     levels of the last round (its options' ``channel_std`` those levels); ``settling``
     (``NoiseSettling``): the largest relative change (in log) of a level over the last
-    round, and whether it met ``NOISE_RTOL``.
+    round, and whether it met ``StrategySettings.noise_rtol``.
     """
     state.active = np.ones(len(run.problem.free), dtype=bool)
+    strategy = run.options.strategy
     stages = run.stages
     gn = solver
     rounds = first_round - 1
     accepted = None if solver is None else (run, state, solver, rounds)
-    for rounds in range(first_round, MAX_NOISE_ROUNDS + 1):
+    for rounds in range(first_round, strategy.max_noise_rounds + 1):
         std = noise_levels(run.ms, state, sensor_std)
         change = _change(std, run.problem.channel_std)
-        if rounds > 1 and change <= NOISE_RTOL and stages[-1].converged:
+        if rounds > 1 and change <= strategy.noise_rtol and stages[-1].converged:
             rounds -= 1
             break
         run = _weighted(recordings, run, std)
@@ -159,7 +143,7 @@ def estimate_noise(
             run, state, gn, kept = accepted
             stages.append(_rejected_round_report(stages[-1], kept, run.ms, state))
         change = _change(noise_levels(run.ms, state, sensor_std), run.problem.channel_std)
-    return run, state, gn, rounds, NoiseSettling(change, change <= NOISE_RTOL)
+    return run, state, gn, rounds, NoiseSettling(change, change <= strategy.noise_rtol)
 
 
 def _change(std: np.ndarray, weight_std: np.ndarray) -> float:
@@ -216,7 +200,7 @@ def warm_solve(run: FitRun, start: SolverState, label: str):
             state,
             label,
             run.options.solver_options,
-            cost_rtol=WARM_COST_RTOL,
+            cost_rtol=run.options.strategy.warm_cost_rtol,
             radius=0.5,
             watchdog=False,
             stall_defect_tol=run.options.defect_tol,

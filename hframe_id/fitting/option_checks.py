@@ -13,13 +13,25 @@ from hframe_id.errors import OptionError, shown
 
 def positive(name: str, value: Any, integer: bool = False) -> None:
     """``value`` is a finite number > 0 (a whole number with ``integer``; never a bool)."""
+    _number(name, value, integer)
+    if not (math.isfinite(value) and value > 0):
+        raise OptionError(f"{name} must be > 0, got {shown(value)}")
+
+
+def nonnegative(name: str, value: Any, integer: bool = False) -> None:
+    """``value`` is a finite number >= 0 (a whole number with ``integer``; never a bool)."""
+    _number(name, value, integer)
+    if not (math.isfinite(value) and value >= 0):
+        raise OptionError(f"{name} must be >= 0, got {shown(value)}")
+
+
+def _number(name: str, value: Any, integer: bool) -> None:
+    """``value`` is a number (a whole one with ``integer``), not a bool."""
     kind = int if integer else (int, float)
     if isinstance(value, bool) or not isinstance(value, kind):
         raise OptionError(
             f"{name} must be a {'whole ' if integer else ''}number, got {shown(value)}"
         )
-    if not (math.isfinite(value) and value > 0):
-        raise OptionError(f"{name} must be > 0, got {shown(value)}")
 
 
 def fraction(name: str, value: Any) -> None:

@@ -18,22 +18,10 @@ import math
 import numpy as np
 
 from hframe_id.fitting.fit_run import FitRun
-from hframe_id.fitting.noise_rounds import MISMATCH_RMS
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.solvers import solver_named
-from hframe_id.fitting.stages import (
-    INTERMEDIATE_DEFECT_TOL,
-    INTERMEDIATE_STEP_TOL,
-    estimate_states,
-    exact_stage,
-    penalty_stage,
-)
-
-#: Iterations without progress after which the fast path (exact continuity on the moving
-#: windows straight from the start) hands over to the penalty fallback (solver.GIVE_UP_*).
-FAST_PATH_PATIENCE = 6
-
+from hframe_id.fitting.stages import estimate_states, exact_stage, penalty_stage
 
 DEFERRED_STAGE = "all windows: deferred to the noise rounds"
 
@@ -65,7 +53,9 @@ def solve(
     theta = theta.copy()
     nodes = run.nodes
     if prepass:
-        nodes, _ = estimate_states(run.solver(ms), nodes, velocity, theta, active, run.stages)
+        nodes, _ = estimate_states(
+            run.solver(ms), nodes, velocity, theta, active, run.stages, options.strategy
+        )
     measured = nodes
     nodes = nodes.copy()
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
@@ -85,7 +75,7 @@ def solve(
             defer_on_mismatch
             and options.noise != "sensor"
             and (run.stages[-1].converged or not prepass)
-            and moving_rms > MISMATCH_RMS
+            and moving_rms > options.strategy.mismatch_rms
         )
     ms = ms.uniform()
     if prepass and moving.size and not mismatch:
@@ -96,7 +86,9 @@ def solve(
         # discontinuous trajectory, and the noise rounds would estimate the noise from it
         # (realistic one-axis plant 2: defects of 79 sensor std, noise 33 sensor std where
         # continuous trajectories are at 0.2-3 rad) and stall (docs/fitting.md).
-        nodes, _ = estimate_states(run.solver(ms), nodes, velocity, theta, active, run.stages)
+        nodes, _ = estimate_states(
+            run.solver(ms), nodes, velocity, theta, active, run.stages, options.strategy
+        )
     gn = run.solver(ms, freeze_sloppy=True)
     if mismatch:
         state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
@@ -158,10 +150,10 @@ def _moving_window_stages(
                     "moving windows",
                     _scaled(smoothing, factor),
                     options.max_iterations,
-                    INTERMEDIATE_STEP_TOL,
-                    INTERMEDIATE_DEFECT_TOL,
+                    options.strategy.intermediate_step_tol,
+                    options.strategy.intermediate_defect_tol,
                     radius=0.5,
-                    give_up=None if use_penalty else FAST_PATH_PATIENCE,
+                    give_up=None if use_penalty else options.strategy.fast_path_patience,
                 )
             )
         if run.stages[-1].converged:

@@ -24,7 +24,8 @@ import numpy as np
 from hframe_id.errors import FitError
 from hframe_id.fitting.dataset import Dataset
 from hframe_id.fitting.experiment import check_rigs, encoder_step
-from hframe_id.fitting.options import HELD_PRIOR_RELATIVE_STD, FitOptions, ProblemOptions
+from hframe_id.fitting.link_options import HELD_PRIOR_RELATIVE_STD, ProblemOptions
+from hframe_id.fitting.options import FitOptions
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording

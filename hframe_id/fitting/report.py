@@ -34,7 +34,7 @@ from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.experiment import applied_inputs
 from hframe_id.fitting.known_points import KnownPointsReport
 from hframe_id.fitting.multistart import StartOutcome, reached_best
-from hframe_id.fitting.noise_rounds import MISMATCH_RMS, NoiseSettling
+from hframe_id.fitting.noise_rounds import NoiseSettling
 from hframe_id.fitting.report_figures import (
     ExperimentSignals,
     plot_correlation,
@@ -134,12 +134,12 @@ def mismatch_statement(result: FitResult) -> str | None:
     """A plain sentence saying that the model does not follow the data at the sensors' noise
     level, or None when the fit weighed its channels by the sensors' noise or, with noise
     levels estimated (a first solve that stalled above it), still ended within
-    ``MISMATCH_RMS`` sensor std on every channel."""
+    ``StrategySettings.mismatch_rms`` sensor std on every channel."""
     noise = result.diagnostics.noise
     if noise is None or noise.method != "estimated":
         return None
     ratios = [c.residual_rms_sensor_std for c in noise.channels.values()]
-    if max(ratios) <= MISMATCH_RMS:
+    if max(ratios) <= result.options.strategy.mismatch_rms:
         return None
     span = f"{ratios[0]:.3g}" if len(ratios) == 1 else f"{min(ratios):.3g} to {max(ratios):.3g}"
     return (

@@ -36,7 +36,8 @@ from hframe_id.fitting.kernel import (
     compiled_windows,
     window_function,
 )
-from hframe_id.fitting.options import FitOptions, TranscriptionOptions
+from hframe_id.fitting.link_options import TranscriptionOptions
+from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, output_matrix, rest_projector
 from hframe_id.fitting.shooting_nodes import ShootingNodes
 from hframe_id.simulation.integrators import (

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from hframe_id.errors import OptionError, shown
 
 if TYPE_CHECKING:
-    from hframe_id.fitting.options import SolverOptions
+    from hframe_id.fitting.link_options import SolverOptions
     from hframe_id.fitting.single_shooting import SingleShooting
     from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 

@@ -7,34 +7,11 @@ import math
 
 import numpy as np
 
-from hframe_id.fitting.options import FitOptions, SolverOptions
+from hframe_id.fitting.link_options import SolverOptions
+from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.solvers import Stage, solver_named
-
-#: Fallback stage on the moving windows when exact continuity from the equation-error start
-#: fails: continuity as a penalty (defects in noise units, this weight), a monotone
-#: trust-region method that stops once an iteration gains less than ``PENALTY_COST_RTOL``;
-#: it takes a poor start into the basin of the exact (condensed) Gauss-Newton iteration.
-PENALTY_WEIGHT = 1.0
-
-
-PENALTY_COST_RTOL = 1e-3
-
-
-#: Tolerances of the intermediate stages (the last stage uses the options' step_tol):
-#: they only need to bring the iterate into the next stage's basin.
-INTERMEDIATE_STEP_TOL = 1e-4
-
-
-INTERMEDIATE_DEFECT_TOL = 1.0
-
-
-#: Iterations of the state-estimation pre-pass (nodes only, parameters held), and the
-#: relative decrease of its merit per iteration below which it stops earlier.
-PREPASS_ITERATIONS = 30
-
-
-PREPASS_COST_RTOL = 1e-4
+from hframe_id.fitting.strategy_settings import StrategySettings
 
 
 def exact_stage(
@@ -54,24 +31,30 @@ def penalty_stage(
     options: FitOptions,
     windows: str,
 ) -> StageReport:
-    """Continuity as a penalty (see PENALTY_WEIGHT): brings far-off nodes into the basin of
-    the exact condensed iteration, stopping once an iteration gains under PENALTY_COST_RTOL."""
+    """Continuity as a penalty (``StrategySettings.penalty_weight``): a monotone
+    trust-region method that brings far-off nodes into the basin of the exact condensed
+    iteration, stopping once an iteration gains under ``penalty_cost_rtol``."""
+    strategy = options.strategy
     return gn.run(
         state,
         f"{windows}, continuity as penalty",
         smoothing,
         options.max_iterations,
-        INTERMEDIATE_STEP_TOL,
+        strategy.intermediate_step_tol,
         math.inf,
-        cost_rtol=PENALTY_COST_RTOL,
+        cost_rtol=strategy.penalty_cost_rtol,
         radius=1.0,
-        penalty=PENALTY_WEIGHT,
+        penalty=strategy.penalty_weight,
     )
 
 
-def estimate_states(gn: GaussNewton, nodes, velocity, theta, active, stages):
+def estimate_states(
+    gn: GaussNewton, nodes, velocity, theta, active, stages, strategy: StrategySettings
+):
     """State-estimation pre-pass: the node states of ``gn``'s transcription with the
-    parameters held at ``theta``; the stage's report is appended to ``stages``.
+    parameters held at ``theta``, within ``strategy``'s pre-pass settings; the stage's
+    report is appended to ``stages``. Returns (nodes, merit): the merit with continuity as
+    the penalty [chi^2 / 2].
 
     The nodes from the data put unmeasured coordinates (and lasers out of range) on the
     rigid motion (belts unstretched); the continuity defects that leaves make the first
@@ -85,16 +68,18 @@ def estimate_states(gn: GaussNewton, nodes, velocity, theta, active, stages):
             state,
             "state estimation",
             ms.problem.smoothing,
-            PREPASS_ITERATIONS,
-            INTERMEDIATE_STEP_TOL,
-            INTERMEDIATE_DEFECT_TOL,
-            cost_rtol=PREPASS_COST_RTOL,
+            strategy.prepass_iterations,
+            strategy.intermediate_step_tol,
+            strategy.intermediate_defect_tol,
+            cost_rtol=strategy.prepass_cost_rtol,
             radius=1.0,
-            penalty=PENALTY_WEIGHT,
+            penalty=strategy.penalty_weight,
         )
     )
     ev = state.evaluation
-    merit = ev.cost + 0.5 * PENALTY_WEIGHT * float(np.sum(ms.defects(ev, state.nodes) ** 2))
+    merit = ev.cost + 0.5 * strategy.penalty_weight * float(
+        np.sum(ms.defects(ev, state.nodes) ** 2)
+    )
     return state.nodes, merit
 
 

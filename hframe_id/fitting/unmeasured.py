@@ -21,17 +21,6 @@ from hframe_id.fitting.output_error import solve
 from hframe_id.fitting.problem import FitProblem
 from hframe_id.fitting.shooting import MultipleShooting
 
-#: Restarts along the stiffnesses at an unmeasured coordinate (see
-#: ``restarts_along_unmeasured_springs``): factors, at most this many, and the cost decrease
-#: (chi^2 / 2 units: 2 is a likelihood-ratio of e^2) a restart must bring to be kept.
-RESTART_FACTORS = (1.18, 1.4)
-
-
-RESTART_LIMIT = 16
-
-
-RESTART_MIN_GAIN = 2.0
-
 
 def measured_coordinates(ms: MultipleShooting) -> np.ndarray:
     """(n_q,) True for the coordinates an output measures, by their position or their rate
@@ -61,29 +50,29 @@ def springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting)
 
 
 def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
-    """Restarts from ``best`` with each free stiffness of a belt section at an unmeasured
-    pulley moved by x/÷ each of ``RESTART_FACTORS``; keeps the lowest converged cost,
-    repeated while it improves (at most ``RESTART_LIMIT`` solves; a move already solved from
-    the current best is not solved again: its solve is deterministic), and reports them as
-    one stage. Also run when the fit has not converged: a converged restart replaces it.
+    """Restarts from ``best`` with each free stiffness of a belt section at an unmeasured pulley
+    moved by x/÷ each of ``StrategySettings.restart_factors``; keeps the lowest converged cost,
+    repeated while it improves (at most ``restart_limit`` solves; a move already solved from the
+    current best is not solved again: its solve is deterministic), and reports them as one stage.
+    Also run when the fit has not converged: a converged restart replaces it.
 
     Each restart is one ``output_error.solve`` (with the state-estimation pre-pass) from the
     fit's end point with one stiffness moved, its stages judged apart (``FitRun.trial``).
     """
-    problem = run.problem
+    problem, strategy = run.problem, run.options.strategy
     state, gn, stats = best.state, best.solver, best.statistics
     springs = springs_at_unmeasured_coordinates(problem, run.ms)
     start = time.perf_counter()
     tried = iterations = 0
     improved = True
     since_improved = set()  # (index, factor) solved from the current best: not again
-    while improved and tried < RESTART_LIMIT:
+    while improved and tried < strategy.restart_limit:
         improved = False
         for index in springs:
-            for factor in (f**sign for f in RESTART_FACTORS for sign in (1, -1)):
+            for factor in (f**sign for f in strategy.restart_factors for sign in (1, -1)):
                 if (
                     not state.active[index]
-                    or tried >= RESTART_LIMIT
+                    or tried >= strategy.restart_limit
                     or (index, factor) in since_improved
                 ):
                     continue
@@ -99,7 +88,7 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
                 tried += 1
                 iterations += sum(st.iterations for st in trial.stages)
                 gain = state.evaluation.cost - trial_state.evaluation.cost
-                if trial.stages[-1].converged and gain > RESTART_MIN_GAIN:
+                if trial.stages[-1].converged and gain > strategy.restart_min_gain:
                     state, gn, final = trial_state, trial_gn, trial.stages[-1]
                     improved = True
                     since_improved = set()
@@ -114,7 +103,7 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
             iterations=iterations,
             wall_time_s=time.perf_counter() - start,
             message=f"{final.message}; {tried} restarts "
-            f"(x/÷{', '.join(f'{f:g}' for f in RESTART_FACTORS)}), "
+            f"(x/÷{', '.join(f'{f:g}' for f in strategy.restart_factors)}), "
             f"best cost {state.evaluation.cost:.6g}",
         )
     )

@@ -40,9 +40,9 @@ def _boxed_result(boxed, options):
 
 
 def test_opening_friction_to_zero_does_not_use_up_a_widening(monkeypatch):
-    """Friction on its lower bound first, then a mass on the box at every factor: the mass
-    still gets the factor squared ``BOX_WIDENINGS`` times (10, 100, 1e4), then one whole fit
-    (``may_widen`` False) that is judged."""
+    """Friction on its lower bound first, then a mass on the box at every factor: the mass still
+    gets the factor squared ``StrategySettings.box_widenings`` times (10, 100, 1e4), then one
+    whole fit (``may_widen`` False) that is judged."""
     from hframe_id.fitting import fit as fit_module
 
     calls = []

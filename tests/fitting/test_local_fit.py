@@ -119,7 +119,8 @@ def test_the_worst_parameter_is_held_first_and_the_rest_solved_again(monkeypatch
 
 
 def test_parameters_the_data_plainly_do_not_determine_are_held_together(monkeypatch):
-    """Over 100 % (HOPELESS_STD) b and c are held at once with the worst, in one solve."""
+    """Over 100 % (``StrategySettings.hopeless_std``) b and c are held at once with the worst,
+    in one solve."""
     held, resolved = _holds(monkeypatch, [[0.05, 1.5, 2.0], [0.05]])
     assert set(held) == {"b", "c"}
     assert [active for active, _ in resolved] == [[True, False, False]]
@@ -132,8 +133,9 @@ def test_a_parameter_with_a_prior_is_never_held(monkeypatch):
 
 @pytest.mark.parametrize(("rms", "holds"), [(1.2, True), (2.0, False)])
 def test_an_unconverged_fit_holds_only_at_the_noise_level(monkeypatch, rms, holds):
-    """Below MISFIT = 1.5 noise std a sloppy direction is the likely reason for the stall
-    (holding helps); above it the errors mean nothing and nothing is held."""
+    """Below ``StrategySettings.hold_misfit`` = 1.5 noise std a sloppy direction is the likely
+    reason for the stall (holding helps); above it the errors mean nothing and nothing is
+    held."""
     held, _ = _holds(monkeypatch, [[0.05, 0.05, 0.5], [0.05, 0.05]], converged=False, rms=rms)
     assert bool(held) is holds
 

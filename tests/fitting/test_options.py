@@ -10,7 +10,7 @@ import pytest
 
 from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, solvers
-from hframe_id.fitting.options import (
+from hframe_id.fitting.link_options import (
     ProblemOptions,
     SolverOptions,
     StatisticsOptions,
@@ -191,7 +191,7 @@ def test_each_component_reads_its_own_options():
 def test_the_library_applies_the_models_fit_defaults():
     """A fit from Python runs the transcription ``hframe-id fit`` runs (issue 26): settings
     left to the model take its declared ``fit_defaults``, else the library's."""
-    from hframe_id.fitting.options import DEFAULT_CONTINUITY, DEFAULT_SHOOTING_INTERVAL
+    from hframe_id.fitting.link_options import DEFAULT_CONTINUITY, DEFAULT_SHOOTING_INTERVAL
     from hframe_id.models.user import load_model_file
 
     load_model_file(Path(__file__).resolve().parents[2] / "models" / "emps_axis.py")

@@ -12,21 +12,24 @@ import pytest
 
 from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, solvers
-from hframe_id.fitting.options import SolverOptions
+from hframe_id.fitting.link_options import SolverOptions
 from hframe_id.fitting.solver import GaussNewton, SolverState
 from hframe_id.fitting.stages import (
-    PENALTY_WEIGHT,
     equation_error_report,
     estimate_states,
     exact_stage,
     penalty_stage,
 )
+from hframe_id.fitting.strategy_settings import StrategySettings
+
+#: The stages' default tuning, which these tests measure.
+STRATEGY = StrategySettings()
 
 
 def _merit(ms, nodes, theta, smoothing) -> float:
     """Cost plus the continuity defects as a penalty: 1/2 |r|^2 + w/2 |d|^2 (noise units)."""
     ev = ms.evaluate(nodes, theta, smoothing)
-    return ev.cost + 0.5 * PENALTY_WEIGHT * float(np.sum(ms.defects(ev, nodes) ** 2))
+    return ev.cost + 0.5 * STRATEGY.penalty_weight * float(np.sum(ms.defects(ev, nodes) ** 2))
 
 
 @pytest.fixture(scope="module")
@@ -75,8 +78,8 @@ def test_an_exact_stage_by_a_solver_no_longer_registered_is_refused(exact_shooti
 def test_the_penalty_stage_brings_a_poor_start_near_the_optimum(exact_shooting, measured_start):
     """From the measured nodes (velocities off by up to 0.3 m/s) and parameters 2 % off: the
     penalty stage lowers the merit and takes the parameters at least 20x closer to the
-    optimum theta = 0 (it stops on a parameter step of INTERMEDIATE_STEP_TOL = 1e-4 or a
-    relative gain of PENALTY_COST_RTOL = 1e-3, so ~1e-3 of the 2e-2 may remain)."""
+    optimum theta = 0 (it stops on a parameter step of ``intermediate_step_tol`` = 1e-4 or a
+    relative gain of ``penalty_cost_rtol`` = 1e-3, so ~1e-3 of the 2e-2 may remain)."""
     problem, ms, _ = exact_shooting
     nodes, velocity = measured_start
     theta = np.array([0.02, -0.02, 0.02])
@@ -99,7 +102,7 @@ def test_state_estimation_moves_the_nodes_only(exact_shooting, measured_start):
     theta = np.zeros(3)
     stages = []
     estimated, merit = estimate_states(
-        GaussNewton(ms), nodes, velocity, theta, np.ones(3, dtype=bool), stages
+        GaussNewton(ms), nodes, velocity, theta, np.ones(3, dtype=bool), stages, STRATEGY
     )
     assert np.array_equal(nodes, given) and np.array_equal(theta, np.zeros(3))
     assert [s.name for s in stages] == ["state estimation"]
@@ -107,7 +110,7 @@ def test_state_estimation_moves_the_nodes_only(exact_shooting, measured_start):
     assert merit == pytest.approx(_merit(ms, estimated, theta, problem.smoothing), rel=1e-12)
     start_error = np.max(np.abs(nodes - true_nodes))
     # The start is off by up to 0.28 m/s (the velocities from differences); the pre-pass
-    # stops on a node step below 1e-4 (INTERMEDIATE_STEP_TOL): a 100x reduction is far
+    # stops on a node step below 1e-4 (``intermediate_step_tol``): a 100x reduction is far
     # inside what it reaches on exact data and far outside what a no-op gives.
     assert np.max(np.abs(estimated - true_nodes)) <= start_error / 100
     assert merit < 1e-4 * _merit(ms, nodes, theta, problem.smoothing)
@@ -121,9 +124,11 @@ def test_state_estimation_holds_the_parameters(exact_shooting, measured_start):
     nodes, velocity = measured_start
     gn = GaussNewton(ms)
     _, held = estimate_states(
-        gn, nodes, velocity, np.array([0.02, -0.02, 0.02]), np.ones(3, dtype=bool), []
+        gn, nodes, velocity, np.array([0.02, -0.02, 0.02]), np.ones(3, dtype=bool), [], STRATEGY
     )
-    _, free = estimate_states(gn, nodes, velocity, np.zeros(3), np.ones(3, dtype=bool), [])
+    _, free = estimate_states(
+        gn, nodes, velocity, np.zeros(3), np.ones(3, dtype=bool), [], STRATEGY
+    )
     assert held > 100 * free
 
 

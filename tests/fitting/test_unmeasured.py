@@ -5,7 +5,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hframe_id.fitting import unmeasured
+from hframe_id.fitting import FitOptions, unmeasured
 from hframe_id.fitting.fit_run import Fitted
 from hframe_id.fitting.solver import SolverState, StageReport
 
@@ -34,6 +34,7 @@ def test_a_move_is_not_solved_twice_from_the_same_best(monkeypatch):
     )
     run = SimpleNamespace(
         problem=problem,
+        options=FitOptions(),  # the default restarts: x/÷1.18 and 1.4, at most 16
         ms=None,
         stages=[_report(cost=50.0)],
         trial=lambda label: SimpleNamespace(stages=[]),

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hframe_id.fitting import FitOptions, fit_recordings
+from hframe_id.fitting import FitOptions, StrategySettings, fit_recordings
 from hframe_id.fitting.known_points import Criterion
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.parameters import load_parameter_file
@@ -44,7 +44,7 @@ def test_mismatched_data_converge_with_estimated_noise_levels(realistic_steps):
     assert min(noise.channels[n].residual_rms_sensor_std for n in ("phi1", "phi2")) > 10
     for name, channel in noise.channels.items():
         # At the fixed point the residual rms is the std the fit weighed with (the iteration
-        # stops once no std moves by more than NOISE_RTOL = 5 %; the last round may move it
+        # stops once no std moves by more than ``noise_rtol`` = 5 %; the last round may move it
         # by that much again: 2x margin). Never below the sensor's own noise.
         assert channel.weight_std >= channel.sensor_std
         ratio = channel.residual_rms / channel.weight_std
@@ -200,11 +200,13 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
     # The rounds alone: no last solve from the replay's rest state after them
     # (``fitting.replayed_rest``, tested in test_replayed_rest_fits.py).
     monkeypatch.setattr(local_fit, "replays_rest", lambda run: False)
-    monkeypatch.setattr(noise_rounds, "MAX_NOISE_ROUNDS", stalled_round)
-    monkeypatch.setattr(noise_rounds, "NOISE_RTOL", 0.0)  # every round runs
     monkeypatch.setattr(noise_rounds, "warm_solve", warm_solve)
     table = load_parameter_file(MODELS / "hframe-8-table4.2.yaml")
-    options = FitOptions(free=("k_l", "k_r", "M_cart", "M_bridge", "b_cart", "b_bridge"))
+    options = FitOptions(
+        free=("k_l", "k_r", "M_cart", "M_bridge", "b_cart", "b_bridge"),
+        # ``stalled_round`` rounds, every one run (no level change is within 0)
+        strategy=StrategySettings(max_noise_rounds=stalled_round, noise_rtol=0.0),
+    )
     result = fit_in_box(realistic_steps, table, options.for_model(table.variant))
     noise = result.diagnostics.noise
     assert len(rounds) == stalled_round and noise.rounds == stalled_round

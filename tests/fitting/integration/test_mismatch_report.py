@@ -132,9 +132,10 @@ def test_a_crash_while_writing_the_report_keeps_the_fit(
 
 
 def test_estimated_noise_that_ends_at_the_sensor_level_states_no_mismatch(mismatched):
-    # A first solve that stalled above the sensors' noise sends the fit to the noise rounds;
-    # if they end within MISMATCH_RMS (3) sensor std on every channel (the shipped one-axis
-    # pulses with the idler under a prior: 0.76 and 1.03), there is no mismatch to state.
+    # A first solve that stalled above the sensors' noise sends the fit to the noise rounds; if
+    # they end within ``StrategySettings.mismatch_rms`` (3) sensor std on every channel (the
+    # shipped one-axis pulses with the idler under a prior: 0.76 and 1.03), there is no mismatch
+    # to state.
     result, _ = mismatched
     noise = result.diagnostics.noise
     channels = {
