@@ -46,7 +46,11 @@ class NlpSolver:
         return f"{self.label} (CasADi nlpsol, Gauss-Newton Hessian)"
 
     def solve(self, stage: Stage) -> StageReport:
-        """Solve the stage's NLP from ``stage.state`` within the options' iterations."""
+        """Solve the stage's NLP from ``stage.state`` within the options' iterations. Where
+        ``sqpmethod`` stops on a search direction below its ``min_step_size`` (its absolute
+        dual tolerance out of reach, or a QP it could not solve: ``NlpOutcome.small_step``),
+        the stage is converged if the Gauss-Newton step from that point moves no parameter
+        by more than ``step_tol``: the default solver's own criterion."""
         state = stage.state
         outcome = solve_nlp(
             stage.transcription,
@@ -57,7 +61,16 @@ class NlpSolver:
             NlpSettings(solver=self.name, max_iter=stage.options.max_iterations),
         )
         state.nodes, state.theta = outcome.nodes, outcome.theta
-        return stage.finish(self.label, outcome.iterations, outcome.converged, outcome.message)
+        converged, message = outcome.converged, outcome.message
+        if outcome.small_step:
+            step = stage.gauss_newton.step_from(state, stage.smoothing)
+            step_tol = stage.options.step_tol
+            converged = step <= step_tol
+            message = (
+                f"search direction below its minimum; the Gauss-Newton step from there "
+                f"{step:.1e} {'<=' if converged else '>'} {step_tol:.0e}"
+            )
+        return stage.finish(self.label, outcome.iterations, converged, message)
 
 
 GAUSS_NEWTON = GaussNewtonSolver()

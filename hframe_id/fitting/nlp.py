@@ -53,16 +53,22 @@ class NlpSettings:
     Attributes
     ----------
     solver : ``"ipopt"`` (interior point, MUMPS) or ``"sqpmethod"`` (CasADi's SQP).
-    qp_solver : QP solver of ``sqpmethod``: ``"qpoases"``, ``"osqp"`` or ``"qrqp"``.
+    qp_solver : QP solver of ``sqpmethod``: ``"qrqp"`` (default: CasADi's active-set QP),
+        ``"qpoases"`` or ``"osqp"``. On the cross-method test's step qpOASES could not solve
+        the QP of the solve from rest (its first nodes fixed, the rest conditions as
+        equalities), and with OSQP the all-window SQP did not converge in 150 iterations;
+        with qrqp both stages reached the other solvers' optimum (2026-11-26).
     tolerance : IPOPT's ``tol`` (scaled KKT error) and, for both solvers, the constraint
-        violation at convergence [noise std]; ``sqpmethod``'s ``tol_pr`` and ``tol_du``.
+        violation at convergence [noise std]; ``sqpmethod``'s ``tol_pr`` and ``tol_du``, and
+        its ``min_step_size`` (inf-norm over node states in noise std and log-parameters:
+        ``NlpOutcome.small_step``).
     max_iter : NLP iterations.
     print_level : 0 silent; 1-12 IPOPT's ``print_level`` (``sqpmethod`` prints its
         iteration table for any level above 0).
     """
 
     solver: str = "ipopt"
-    qp_solver: str = "qpoases"
+    qp_solver: str = "qrqp"
     tolerance: float = 1e-10
     max_iter: int = 200
     print_level: int = 0
@@ -108,6 +114,9 @@ class NlpOutcome:
     wall_time_s : build and solve [s].
     substeps : RK4 substeps per sample in every window.
     build_time_s : of that, building the NLP and the solver [s].
+    small_step : ``sqpmethod`` stopped because its search direction fell below
+        ``min_step_size`` before its dual tolerance was met (``stopped_on_small_step``):
+        at an optimum, or where a QP failed; the caller judges which.
     """
 
     nodes: np.ndarray
@@ -120,6 +129,7 @@ class NlpOutcome:
     wall_time_s: float
     substeps: int
     build_time_s: float
+    small_step: bool = False
 
 
 class _Transcription:
@@ -343,11 +353,12 @@ class _Transcription:
                     "qpsol": settings.qp_solver,
                     "tol_pr": settings.tolerance,
                     "tol_du": settings.tolerance,
+                    "min_step_size": settings.tolerance,
                     "max_iter": settings.max_iter,
                     "print_header": verbose,
                     "print_iteration": verbose,
                     "print_status": verbose,
-                    "qpsol_options": _quiet_qp(settings.qp_solver),
+                    "qpsol_options": _qp_options(settings.qp_solver),
                 }
             )
         return ca.nlpsol("hframe_fit", settings.solver, nlp, options)
@@ -378,13 +389,29 @@ def _undifferentiated_substep(model) -> ca.Function:
     )
 
 
-def _quiet_qp(name: str) -> dict:
-    """Options that silence a QP solver of ``sqpmethod``."""
-    return {
+def stopped_on_small_step(settings: NlpSettings, stats: dict) -> bool:
+    """Whether ``sqpmethod`` stopped because its search direction fell below
+    ``min_step_size`` (``settings.tolerance``) before its dual tolerance was met. Its
+    ``tol_du`` is absolute: with a Gauss-Newton Hessian of ~1e4 (chi^2 / 2 per unit of the
+    scaled variables) a step of 1e-10 is a gradient of ~1e-6, so at an optimum the step
+    falls below ``min_step_size`` before the gradient below ``tol_du`` (the shipped six steps
+    stopped there, at the other solvers' optimum within 2e-10 relative). A QP the SQP could
+    not solve also ends there (no step), so this is no verdict by itself."""
+    return (
+        settings.solver == "sqpmethod"
+        and stats.get("return_status") == "Search_Direction_Becomes_Too_Small"
+    )
+
+
+def _qp_options(name: str) -> dict:
+    """Options of a QP solver of ``sqpmethod``: silent, and a QP it cannot solve is the SQP
+    iteration's verdict (its return status), not an exception out of the fit."""
+    quiet = {
         "qpoases": {"printLevel": "none"},
         "osqp": {"osqp": {"verbose": False}},
         "qrqp": {"print_iter": False, "print_header": False},
     }[name]
+    return {**quiet, "error_on_fail": False}
 
 
 def rest_conditions(ms: MultipleShooting) -> list[tuple[int, np.ndarray]]:
@@ -485,4 +512,5 @@ def solve_nlp(
         wall_time_s=time.perf_counter() - start,
         substeps=n_sub,
         build_time_s=build_time,
+        small_step=stopped_on_small_step(settings, stats) and needed <= n_sub,
     )

@@ -328,17 +328,7 @@ class GaussNewton(CondensedModel):
         while walk.radius >= settings.min_radius and self.node_damping <= settings.max_node_damping:
             key = (self.node_damping, self.prox_scale)
             if damping_used != key:
-                # Sensitivities that overflow are the verdict below (``overflowed``), not a
-                # numpy warning printed on the user's terminal.
-                with np.errstate(over="ignore", invalid="ignore"):
-                    linearized = (
-                        self._linearize(ev, state.nodes, free)
-                        if penalty is None
-                        else self._linearize_penalty(ev, state.nodes, free, penalty)
-                    )
-                    h_red, g_red, complete = self._with_prior(
-                        ev, free, linearized, exact=penalty is None
-                    )
+                h_red, g_red, complete = self._linear_model(ev, state.nodes, free, penalty)
                 damping_used = key
             out.overflowed = not (np.all(np.isfinite(h_red)) and np.all(np.isfinite(g_red)))
             if out.overflowed:
@@ -393,6 +383,39 @@ class GaussNewton(CondensedModel):
                 break
             out.full_step = False
         return out
+
+    def _linear_model(self, ev: Evaluation, nodes, free: np.ndarray, penalty: float | None):
+        """The reduced Gauss-Newton model at ``ev`` (exact continuity, or continuity as a
+        ``penalty``): (H, g, complete), ``complete(d)`` the node steps and model cost change
+        of a parameter step d. Sensitivities that overflow give non-finite H or g, the
+        caller's verdict, not a numpy warning printed on the user's terminal."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            linearized = (
+                self._linearize(ev, nodes, free)
+                if penalty is None
+                else self._linearize_penalty(ev, nodes, free, penalty)
+            )
+            return self._with_prior(ev, free, linearized, exact=penalty is None)
+
+    def step_from(self, state: SolverState, smoothing: tuple[float, float]) -> float:
+        """The largest free-parameter change [log p] of the Gauss-Newton step from
+        ``state`` (exact continuity, as a stage's first iteration computes it, within the
+        largest trust region and the bounds); inf where the region or non-finite
+        sensitivities cut it. ``run``'s step criterion (converged at ``step_tol``) applied
+        to a point another solver reached."""
+        self.node_damping = self.settings.node_damping
+        self.set_smoothing(smoothing, self.settings.proximal_weight)
+        self.links = self.ms.linked.copy()
+        ev = self._evaluate(state, state.nodes, state.theta, smoothing)
+        index = np.flatnonzero(state.active)
+        h_red, g_red, _ = self._linear_model(ev, state.nodes, state.active.copy(), None)
+        if not (np.all(np.isfinite(h_red)) and np.all(np.isfinite(g_red))):
+            return math.inf
+        lo, hi = self.problem.theta_lower, self.problem.theta_upper
+        d, full_step = self._bounded_step(
+            h_red, g_red, state.theta[index], lo[index], hi[index], self.settings.max_radius
+        )
+        return float(np.max(np.abs(d), initial=0.0)) if full_step else math.inf
 
     def _bounded_step(self, h_red, g_red, theta_f, lower, upper, radius: float):
         """(step in the free log-parameters, whether the trust region left it whole).

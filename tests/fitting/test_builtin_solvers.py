@@ -28,14 +28,18 @@ def _stage(exact_shooting, theta, options=None, **settings) -> Stage:
     return Stage("all windows", GaussNewton(ms), state, options, settings)
 
 
-@pytest.mark.parametrize("solver", [GAUSS_NEWTON, IPOPT], ids=["gauss-newton", "ipopt"])
+@pytest.mark.parametrize(
+    "solver", [GAUSS_NEWTON, IPOPT, SQPMETHOD], ids=["gauss-newton", "ipopt", "sqpmethod"]
+)
 def test_each_solver_reaches_the_optimum_of_exact_data(exact_shooting, solver):
-    """Exact data of Table 4.2: the optimum is theta = 0 with zero cost and defects."""
+    """Exact data of Table 4.2: the optimum is theta = 0 with zero cost and defects.
+    (``sqpmethod`` converges by its own tolerances here, or stops on its smallest search
+    direction and is judged by the Gauss-Newton step from there, as the next test shows.)"""
     stage = _stage(exact_shooting, OFF, radius=0.5)
     report = solver.solve(stage)
     assert report.converged, report.message
-    # Gauss-Newton stops on a parameter step <= step_tol = 1e-6, IPOPT at its tolerance
-    # 1e-10; with zero residual at the optimum both converge quadratically, so the error
+    # Gauss-Newton stops on a parameter step <= step_tol = 1e-6, IPOPT and SQP at their
+    # tolerance 1e-10; with zero residual at the optimum both converge quadratically, so the error
     # left after the last step is far below 1e-6.
     assert stage.state.theta == pytest.approx(0.0, abs=1e-6)
     # The cost is quadratic in that error: 1.0e4 at the start's 2 %, so an error of 1e-6
@@ -123,3 +127,34 @@ def test_each_built_in_name_gives_its_solver_and_says_how_it_globalises(
     solver = solver_named(name)
     assert solver.penalty_fallback is penalty_fallback
     assert solver.description == description
+
+
+@pytest.mark.parametrize(("end", "converged"), [(OFF, False), (np.zeros(3), True)])
+def test_sqps_small_step_stop_is_judged_by_the_gauss_newton_step_from_its_end(
+    exact_shooting, monkeypatch, end, converged
+):
+    """``sqpmethod`` also stops on a small search direction where its QP failed (no step):
+    that is converged only where the Gauss-Newton step from the end point is within
+    ``step_tol`` (at the optimum, theta = 0), not 2 % away from it."""
+    problem, _, nodes = exact_shooting
+
+    def fake_solve_nlp(ms, start_nodes, theta, active, smoothing, settings):
+        return NlpOutcome(
+            nodes,
+            end.copy(),
+            False,
+            "Search Direction Becomes Too Small",
+            3,
+            np.nan,
+            np.nan,
+            0.0,
+            4,
+            0.0,
+            small_step=True,
+        )
+
+    monkeypatch.setattr(builtin_solvers, "solve_nlp", fake_solve_nlp)
+    report = SQPMETHOD.solve(_stage(exact_shooting, OFF))
+    assert report.converged is converged
+    assert "the Gauss-Newton step from there" in report.message
+    assert ("<= 1e-06" in report.message) is converged

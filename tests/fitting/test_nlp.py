@@ -49,3 +49,18 @@ def test_the_nlp_holds_a_record_at_rest_to_its_rigid_modes(table_and_step):
     assert np.any(outcome.nodes[0, : ms.nq] != nodes[0, : ms.nq])
     np.testing.assert_allclose(rows @ outcome.nodes[0], rows @ nodes[0], rtol=0, atol=1e-9)
     assert not outcome.nodes[0, ms.nq :].any()
+
+
+@pytest.mark.parametrize(
+    ("solver", "status", "small"),
+    [
+        ("sqpmethod", "Search_Direction_Becomes_Too_Small", True),
+        ("sqpmethod", "Maximum_Iterations_Exceeded", False),
+        ("ipopt", "Search_Direction_Becomes_Too_Small", False),  # IPOPT's own failure
+    ],
+)
+def test_only_sqpmethods_small_search_direction_is_a_small_step_stop(solver, status, small):
+    from hframe_id.fitting.nlp import stopped_on_small_step
+
+    settings = NlpSettings(solver=solver)
+    assert stopped_on_small_step(settings, {"return_status": status, "success": False}) is small
