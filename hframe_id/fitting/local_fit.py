@@ -1,12 +1,13 @@
 """One fit inside one box of parameter bounds: the stages from a start to an optimum.
 
-The strategy, in the order :func:`fit_in_box` runs it (``docs/fitting.md`` has the
-measurements behind each choice); each stage is a function of the run's shared state
-(:class:`hframe_id.fitting.fit_run.FitRun`):
+The strategy (:func:`strategy`: a list of stage objects, each called with where the fit
+stands, :class:`Standing`, and returning where it stands after), in the order
+:func:`fit_in_box` runs it (``docs/fitting.md`` has the measurements behind each choice):
 
-1. equation error: the models are linear in their parameters once multiplied by the mass
-   matrix, so a regression on differentiated measurements gives a start in milliseconds
-   (kept only if it fits the data better than the given start; :func:`_start`);
+1. equation error (in :class:`Attempts`, as 2 and 3): the models are linear in their
+   parameters once multiplied by the mass matrix, so a regression on differentiated
+   measurements gives a start in milliseconds (kept only if it fits the data better than
+   the given start; :func:`_start`);
 2. the output-error stages (:func:`hframe_id.fitting.output_error.solve`): multiple
    shooting on the windows where something moves, then on every window by the named solver;
 3. statistics at the optimum; free parameters whose relative standard error exceeds the
@@ -15,12 +16,13 @@ measurements behind each choice); each stage is a function of the run's shared s
    :mod:`hframe_id.fitting.design_advice` names the standard experiments that would
    identify it;
 4. with a coordinate no output measures (one-axis: the idler), restarts along the springs
-   that hold it (:func:`hframe_id.fitting.unmeasured.restarts_along_unmeasured_springs`);
+   that hold it (:class:`UnmeasuredRestarts`); a fit that may widen its box stops here if
+   it ends on the default box (:class:`OnTheBox`);
 5. noise levels estimated with the fit where the model cannot follow the data at the
-   sensors' level (:func:`hframe_id.fitting.noise_rounds.estimate_noise`);
+   sensors' level (:class:`NoiseLevels`);
 6. a last solve with each record at rest started as ``validate`` replays it
-   (:func:`hframe_id.fitting.replayed_rest.solve_from_replayed_rest`);
-7. the misfit judgement (:func:`_misfit_judged`).
+   (:class:`ReplayedRest`);
+7. the misfit judgement of the end (:func:`_finished`).
 
 A model with a coordinate no output measures first tries stages 1-3 with the node states
 estimated at the parameters held (a state-estimation pre-pass), and if that does not
@@ -31,7 +33,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -39,7 +42,7 @@ from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.held_uncertainty import include_held_uncertainty
 from hframe_id.fitting.holds import hold_unidentified
-from hframe_id.fitting.noise_rounds import estimate_noise, noise_report
+from hframe_id.fitting.noise_rounds import NoiseSettling, estimate_noise, noise_report
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.output_error import DEFERRED_STAGE, solve
 from hframe_id.fitting.problem import build_problem
@@ -65,7 +68,8 @@ def fit_in_box(
     may_widen: bool = False,
     screened: bool = False,
 ) -> FitResult:
-    """``fit_recordings`` within the box of ``options`` (its bounds and bound factor). With
+    """``fit_recordings`` within the box of ``options`` (its bounds and bound factor): the
+    stages of ``strategy`` in order, then the judgements of the end (``_finished``). With
     ``may_widen``, a first solve that ends on the default box returns before the noise
     rounds (the box will be opened and the fit repeated: measured on the lubricated plant of
     issue 25, the rounds took 25 of the 27 s of a fit whose six friction terms ended on the
@@ -73,50 +77,141 @@ def fit_in_box(
     screen's choice (``start_screen``), which judged the equation-error estimate already, by
     the criterion the fit is judged by: the stages begin from ``initial`` as it is."""
     run = _started_run(recordings, initial, options, regress=not screened)
-    options = run.options
-    # One-axis (a coordinate no output measures): first with the node states estimated at
-    # the parameters held (converges from the truth on fresh plants, where the path from the
-    # measured nodes left it); if that fails, the path from the measured nodes (which fits
-    # the shipped pulses from Table 2.3, where the pre-pass path stalled). docs/fitting.md.
-    unmeasured = unmeasured_coordinates(run.ms) and options.state_prepass
-    best = _best_attempt(run, [True, False] if unmeasured else [False])
-    deferred = run.stages[-1].name == DEFERRED_STAGE
-    if unmeasured and not deferred:
-        best = restarts_along_unmeasured_springs(run, best)
-    if may_widen:
-        early = run.result(best)
-        if early.diagnostics.at_default_box:
-            return early
-    sensor_std = run.problem.channel_std.copy()
-    rounds = 0
-    settling = None
-    mismatch = (
-        deferred or run.ms.residual_rms(best.state.evaluation.cost) > options.strategy.mismatch_rms
+    at = Standing(run, recordings, run.problem.channel_std.copy())
+    for stage in strategy(run, may_widen):
+        at = stage(at)
+        if at.ended is not None:
+            return at.ended
+    return _finished(at)
+
+
+@dataclass
+class Standing:
+    """Where a fit in one box stands between its stages: its run (``FitRun``; the noise
+    rounds and the last solve replace it), its best end so far (``Fitted``), the recordings,
+    the sensors' noise std [SI] the run began with, the noise rounds run and how settled
+    their levels are, whether the output-error stages deferred to the rounds, and the result
+    of a stage that ended the fit early (``ended``), else None."""
+
+    run: FitRun
+    recordings: list[Recording]
+    sensor_std: np.ndarray
+    best: Fitted | None = None
+    rounds: int = 0
+    settling: NoiseSettling | None = None
+    deferred: bool = False
+    ended: FitResult | None = None
+
+
+class Stage(Protocol):
+    """One stage of the strategy: where the fit stands after it."""
+
+    def __call__(self, at: Standing) -> Standing: ...
+
+
+def strategy(run: FitRun, may_widen: bool) -> tuple[Stage, ...]:
+    """The stages of a fit in one box, in order (module docstring). A model with a
+    coordinate no output measures (one-axis: the idler) first attempts the fit with its
+    node states estimated at the parameters held (converges from the truth on fresh plants,
+    where the path from the measured nodes left it), then from the measured nodes (which fits
+    the shipped pulses from Table 2.3, where the pre-pass path stalled), and restarts along
+    the springs that hold it; ``may_widen`` stops a fit on the default box before the
+    noise rounds (``fit._fit_widening`` opens the box)."""
+    unmeasured = bool(unmeasured_coordinates(run.ms)) and run.options.state_prepass
+    return (
+        Attempts((True, False) if unmeasured else (False,)),
+        *((UnmeasuredRestarts(),) if unmeasured else ()),
+        *((OnTheBox(),) if may_widen else ()),
+        NoiseLevels(),
+        ReplayedRest(),
     )
-    if options.noise == "estimate" or (options.noise == "auto" and mismatch):
-        # The fit is now of the problem weighted by the estimated levels, and says so.
-        run, state, gn, rounds, settling = estimate_noise(run, best.state, recordings, sensor_std)
+
+
+@dataclass(frozen=True)
+class Attempts:
+    """The equation-error start, the output-error stages and the identifiability holds,
+    once per entry of ``prepasses`` (with the state-estimation pre-pass or not), until one
+    converges or defers to the noise rounds; else the attempt of lowest cost."""
+
+    prepasses: tuple[bool, ...]
+
+    def __call__(self, at: Standing) -> Standing:
+        best = _best_attempt(at.run, list(self.prepasses))
+        return replace(at, best=best, deferred=at.run.stages[-1].name == DEFERRED_STAGE)
+
+
+class UnmeasuredRestarts:
+    """Restarts along the springs at an unmeasured coordinate
+    (``unmeasured.restarts_along_unmeasured_springs``), unless the stages deferred."""
+
+    def __call__(self, at: Standing) -> Standing:
+        if at.deferred:
+            return at
+        return replace(at, best=restarts_along_unmeasured_springs(at.run, at.best))
+
+
+class OnTheBox:
+    """Ends the fit where its end lies on the default box (to be opened and the fit
+    repeated)."""
+
+    def __call__(self, at: Standing) -> Standing:
+        result = at.run.result(at.best)
+        return replace(at, ended=result) if result.diagnostics.at_default_box else at
+
+
+class NoiseLevels:
+    """Noise levels estimated with the fit (``noise_rounds.estimate_noise``) where
+    ``FitOptions.noise`` asks for them: "estimate", or "auto" and the fit does not reach
+    the sensors' noise (``StrategySettings.mismatch_rms``) or deferred to the rounds. The
+    fit is then of the problem weighted by the estimated levels, and says so."""
+
+    def __call__(self, at: Standing) -> Standing:
+        run, options = at.run, at.run.options
+        rms = run.ms.residual_rms(at.best.state.evaluation.cost)
+        mismatch = at.deferred or rms > options.strategy.mismatch_rms
+        if not (options.noise == "estimate" or (options.noise == "auto" and mismatch)):
+            return at
+        run, state, gn, rounds, settling = estimate_noise(
+            run, at.best.state, at.recordings, at.sensor_std
+        )
         best = Fitted(state, gn, run.statistics(gn, state))
-    if run.stages[-1].converged and replays_rest(run):
-        run, best = solve_from_replayed_rest(run, best, recordings)
-        if rounds and run.options.rest_start == "replay":
-            # Its end kept: the levels of the point the fit reports, the rounds from rest.
-            run, state, gn, rounds, settling = estimate_noise(
-                run, best.state, recordings, sensor_std, rounds + 1, best.solver
-            )
-            if state is not best.state:
-                best = Fitted(state, gn, run.statistics(gn, state), best.held)
+        return replace(at, run=run, best=best, rounds=rounds, settling=settling)
+
+
+class ReplayedRest:
+    """The last solve, from the replay's rest state (``replayed_rest``), after a converged
+    stage; where its end is kept and the levels were estimated, the noise rounds go on from
+    it (the levels of the point the fit reports)."""
+
+    def __call__(self, at: Standing) -> Standing:
+        if not (at.run.stages[-1].converged and replays_rest(at.run)):
+            return at
+        run, best = solve_from_replayed_rest(at.run, at.best, at.recordings)
+        at = replace(at, run=run, best=best)
+        if not (at.rounds and run.options.rest_start == "replay"):
+            return at
+        run, state, gn, rounds, settling = estimate_noise(
+            run, best.state, at.recordings, at.sensor_std, at.rounds + 1, best.solver
+        )
+        if state is not best.state:
+            best = Fitted(state, gn, run.statistics(gn, state), best.held)
+        return replace(at, run=run, best=best, rounds=rounds, settling=settling)
+
+
+def _finished(at: Standing) -> FitResult:
+    """The result of the fit's end: its noise report, the misfit judgement, the held
+    parameters' uncertainty and the wall time."""
+    run, best = at.run, at.best
     best.solver.evaluations = run.counter["evaluations"]
     result = run.result(best)
     result = result.with_diagnostics(
         noise=noise_report(
-            run.problem, sensor_std, result.diagnostics.channel_rms, rounds, settling
+            run.problem, at.sensor_std, result.diagnostics.channel_rms, at.rounds, at.settling
         )
     )
-    result = _misfit_judged(result, run.ms, best.state, sensor_std, estimated=bool(rounds))
-    result = include_held_uncertainty(run.problem, recordings, best.state, result)
-    result = replace(result, wall_time_s=time.perf_counter() - run.started)
-    return result
+    result = _misfit_judged(result, run.ms, best.state, at.sensor_std, estimated=bool(at.rounds))
+    result = include_held_uncertainty(run.problem, at.recordings, best.state, result)
+    return replace(result, wall_time_s=time.perf_counter() - run.started)
 
 
 def _started_run(
