@@ -1,7 +1,7 @@
 """One fit inside one box (``fitting.local_fit``): the rules between its stages, each on
-hand-made inputs. The misfit judgement, the identifiability holds (``fitting.holds``) and
-the coordinates no output measures (``fitting.unmeasured``); the stages themselves:
-test_stages.py; whole fits: integration/."""
+hand-made inputs. The misfit judgement, the identifiability holds (``fitting.holds``), the
+coordinates no output measures (``fitting.unmeasured``) and the strategy's list of stages;
+the stages themselves: test_stages.py; whole fits: integration/."""
 
 from __future__ import annotations
 
@@ -178,3 +178,99 @@ def test_the_one_axis_idler_is_unmeasured_and_held_by_k2_and_k3(one_axis_shootin
     assert unmeasured.unmeasured_coordinates(ms)
     springs = unmeasured.springs_at_unmeasured_coordinates(problem, ms)
     assert [problem.free_names[i] for i in springs] == ["k2", "k3"]
+
+
+# --- the strategy: its stages in order ---------------------------------------------------
+
+
+def _run(noise="auto", state_prepass=True, rms=1.0, last="all windows"):
+    """A stand-in run: its options, a transcription whose residual rms [noise std] is
+    ``rms``, and stages that ended with ``last``."""
+    options = FitOptions(noise=noise, state_prepass=state_prepass)
+    ms = SimpleNamespace(residual_rms=lambda cost: rms)
+    stages = [SimpleNamespace(name=last, converged=True)]
+    return SimpleNamespace(options=options, ms=ms, stages=stages)
+
+
+def _names(stages):
+    return [type(stage).__name__ for stage in stages]
+
+
+@pytest.mark.parametrize(
+    ("unmeasured_coordinate", "state_prepass", "may_widen", "names", "prepasses"),
+    [
+        (False, True, False, ["Attempts", "NoiseLevels", "ReplayedRest"], (False,)),
+        (False, True, True, ["Attempts", "OnTheBox", "NoiseLevels", "ReplayedRest"], (False,)),
+        (
+            True,
+            True,
+            False,
+            ["Attempts", "UnmeasuredRestarts", "NoiseLevels", "ReplayedRest"],
+            (True, False),
+        ),
+        (True, False, False, ["Attempts", "NoiseLevels", "ReplayedRest"], (False,)),
+    ],
+)
+def test_the_strategy_lists_its_stages_for_the_model_and_the_box(
+    monkeypatch, unmeasured_coordinate, state_prepass, may_widen, names, prepasses
+):
+    """A coordinate no output measures (one-axis: the idler) adds the pre-pass attempt and
+    the restarts along its springs, unless the pre-pass is off; a fit that may widen its
+    box stops on it before the noise rounds."""
+    found = [1] if unmeasured_coordinate else []
+    monkeypatch.setattr(local_fit, "unmeasured_coordinates", lambda ms: found)
+    stages = local_fit.strategy(_run(state_prepass=state_prepass), may_widen)
+    assert _names(stages) == names
+    assert stages[0].prepasses == prepasses
+
+
+def _standing(run, deferred=False):
+    best = Fitted(SimpleNamespace(evaluation=SimpleNamespace(cost=1.0)), "solver", None)
+    return local_fit.Standing(run, [], np.ones(2), best=best, deferred=deferred)
+
+
+def test_restarts_are_not_run_where_the_stages_deferred_to_the_noise_rounds(monkeypatch):
+    calls = []
+    monkeypatch.setattr(
+        local_fit, "restarts_along_unmeasured_springs", lambda run, best: calls.append(best)
+    )
+    at = _standing(_run(), deferred=True)
+    assert local_fit.UnmeasuredRestarts()(at) is at and calls == []
+    local_fit.UnmeasuredRestarts()(_standing(_run()))
+    assert len(calls) == 1
+
+
+@pytest.mark.parametrize(
+    ("noise", "rms", "deferred", "estimated"),
+    [
+        ("sensor", 10.0, True, False),  # the sensors' levels, whatever the misfit
+        ("auto", 1.0, False, False),  # at the noise level: nothing to estimate
+        ("auto", 10.0, False, True),  # above StrategySettings.mismatch_rms (3)
+        ("auto", 1.0, True, True),  # the stages deferred to the rounds
+        ("estimate", 1.0, False, True),
+    ],
+)
+def test_noise_levels_are_estimated_where_the_options_and_the_misfit_ask(
+    monkeypatch, noise, rms, deferred, estimated
+):
+    run = _run(noise=noise, rms=rms)
+    run.statistics = lambda gn, state: "statistics"
+    rounds = []
+
+    def estimate_noise(run, state, recordings, sensor_std):
+        rounds.append(state)
+        return run, state, "solver", 3, "settling"
+
+    monkeypatch.setattr(local_fit, "estimate_noise", estimate_noise)
+    at = local_fit.NoiseLevels()(_standing(run, deferred))
+    assert bool(rounds) is estimated
+    assert (at.rounds, at.settling) == ((3, "settling") if estimated else (0, None))
+
+
+@pytest.mark.parametrize("on_the_box", [True, False])
+def test_a_fit_on_the_default_box_ends_with_its_result_as_it_stands(on_the_box):
+    result = SimpleNamespace(diagnostics=SimpleNamespace(at_default_box=("k_l",) * on_the_box))
+    run = _run()
+    run.result = lambda best: result
+    at = local_fit.OnTheBox()(_standing(run))
+    assert (at.ended is result) is on_the_box
