@@ -103,12 +103,3 @@ class GaussNewtonSettings:
                     f"gauss_newton.{low} must not exceed gauss_newton.{high}, got "
                     f"{shown(getattr(self, low))} > {shown(getattr(self, high))}"
                 )
-
-    def changed(self) -> dict[str, float]:
-        """The settings that differ from the defaults, by name (for a fit's provenance)."""
-        default = GaussNewtonSettings()
-        return {
-            f.name: getattr(self, f.name)
-            for f in fields(self)
-            if getattr(self, f.name) != getattr(default, f.name)
-        }

@@ -1,11 +1,12 @@
-"""One-line checks of option values, shared by the option classes of the fitter's links.
-
-Each raises :class:`~hframe_id.errors.OptionError` naming the option and the value given.
+"""One-line checks of option values, shared by the option classes of the fitter's links
+(each raises :class:`~hframe_id.errors.OptionError` naming the option and the value given),
+and what a set of settings changes from its defaults.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from typing import Any
 
 from hframe_id.errors import OptionError, shown
@@ -55,6 +56,18 @@ def names(name: str, value: Any) -> tuple[str, ...]:
             f"{name} must be a sequence of parameter names or patterns, got {shown(value)}"
         )
     return items
+
+
+def changed_fields(settings: Any) -> dict[str, Any]:
+    """The fields of the dataclass instance ``settings`` that differ from its class's
+    defaults, by name (for a fit's provenance: ``GaussNewtonSettings``,
+    ``StrategySettings``)."""
+    default = type(settings)()
+    return {
+        f.name: getattr(settings, f.name)
+        for f in fields(settings)
+        if getattr(settings, f.name) != getattr(default, f.name)
+    }
 
 
 def as_tuple(value: Any) -> tuple | None:

@@ -26,7 +26,7 @@ from hframe_id.fitting.link_options import (
     TranscriptionOptions,
     default_threads,
 )
-from hframe_id.fitting.option_checks import one_of, positive
+from hframe_id.fitting.option_checks import changed_fields, one_of, positive
 from hframe_id.fitting.strategy_settings import StrategySettings
 
 NOISE_METHODS = ("auto", "sensor", "estimate")
@@ -382,7 +382,7 @@ class FitOptions:
             "first_stage": bool(self.first_stage),
             "state_prepass": bool(self.state_prepass),
             "max_iterations": int(self.max_iterations),
-            "gauss_newton": self.gauss_newton.changed() or "default",
+            "gauss_newton": changed_fields(self.gauss_newton) or "default",
             "step_tol": float(self.step_tol),
             "defect_tol": float(self.defect_tol),
             "identifiability_threshold": float(self.identifiability_threshold),
@@ -392,7 +392,7 @@ class FitOptions:
             "starts": int(self.starts),
             "start_seed": int(self.start_seed),
             "screen_start": bool(self.screen_start),
-            "strategy": self.strategy.changed() or "default",
+            "strategy": changed_fields(self.strategy) or "default",
             "uncertainty": self.uncertainty,
             "confidence": float(self.confidence),
             "substep_safety": float(self.substep_safety),

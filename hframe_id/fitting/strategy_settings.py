@@ -112,12 +112,3 @@ class StrategySettings:
             if factor <= 1:
                 raise OptionError(f"{name} must be factors > 1, got {shown(value)}")
         object.__setattr__(self, "restart_factors", tuple(float(f) for f in factors))
-
-    def changed(self) -> dict[str, object]:
-        """The settings that differ from the defaults, by name (for a fit's provenance)."""
-        default = StrategySettings()
-        return {
-            f.name: getattr(self, f.name)
-            for f in fields(self)
-            if getattr(self, f.name) != getattr(default, f.name)
-        }

@@ -6,12 +6,13 @@ import pytest
 
 from hframe_id.errors import OptionError
 from hframe_id.fitting import FitOptions, StrategySettings
+from hframe_id.fitting.option_checks import changed_fields
 from hframe_id.fitting.solver import GaussNewton
 from hframe_id.fitting.stages import estimate_states
 
 
 def test_defaults_are_recorded_as_default_and_a_change_by_name():
-    assert StrategySettings().changed() == {}
+    assert changed_fields(StrategySettings()) == {}
     assert FitOptions().for_model("hframe-8").describe()["strategy"] == "default"
     tuned = FitOptions(strategy=StrategySettings(max_noise_rounds=20, restart_factors=[1.5]))
     recorded = tuned.for_model("hframe-8").describe()["strategy"]
@@ -38,7 +39,7 @@ def test_a_bad_setting_is_refused_naming_it_and_its_value(given, message):
 def test_zero_is_a_setting_where_it_means_something():
     """No widening, no restart, and a noise tolerance every change exceeds (every round runs)."""
     settings = StrategySettings(box_widenings=0, restart_limit=0, noise_rtol=0.0)
-    assert settings.changed() == {"box_widenings": 0, "restart_limit": 0, "noise_rtol": 0.0}
+    assert changed_fields(settings) == {"box_widenings": 0, "restart_limit": 0, "noise_rtol": 0.0}
 
 
 def test_fit_options_refuse_settings_of_another_type():
