@@ -9,10 +9,10 @@ from zero); costs are chi^2 / 2 (residuals in noise std); defects are in noise s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from hframe_id.errors import OptionError, shown
-from hframe_id.fitting.option_checks import fraction, positive
+from hframe_id.fitting.option_checks import check_numbers
 
 #: Fields that are whole numbers (counts of iterations or returns).
 _COUNTS = ("watchdog_patience", "watchdog_reverts", "free_steps", "cost_window")
@@ -91,12 +91,7 @@ class GaussNewtonSettings:
     sloppy_std: float = 0.5
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            name, value = f"gauss_newton.{f.name}", getattr(self, f.name)
-            if f.name in _FRACTIONS:
-                fraction(name, value)
-            else:
-                positive(name, value, integer=f.name in _COUNTS)
+        check_numbers(self, "gauss_newton", counts=_COUNTS, fractions=_FRACTIONS)
         for low, high in _ORDERED:
             if getattr(self, low) > getattr(self, high):
                 raise OptionError(

@@ -58,6 +58,29 @@ def names(name: str, value: Any) -> tuple[str, ...]:
     return items
 
 
+def check_numbers(
+    settings: Any,
+    prefix: str,
+    counts: tuple[str, ...] = (),
+    fractions: tuple[str, ...] = (),
+    may_be_zero: tuple[str, ...] = (),
+    skip: tuple[str, ...] = (),
+) -> None:
+    """Each field of the dataclass instance ``settings`` (but ``skip``) a finite number > 0,
+    named ``<prefix>.<field>`` in the message: whole numbers among ``counts``, in (0, 1)
+    among ``fractions``, >= 0 among ``may_be_zero``."""
+    for f in fields(settings):
+        if f.name in skip:
+            continue
+        name, value = f"{prefix}.{f.name}", getattr(settings, f.name)
+        if f.name in fractions:
+            fraction(name, value)
+        elif f.name in may_be_zero:
+            nonnegative(name, value, integer=f.name in counts)
+        else:
+            positive(name, value, integer=f.name in counts)
+
+
 def changed_fields(settings: Any) -> dict[str, Any]:
     """The fields of the dataclass instance ``settings`` that differ from its class's
     defaults, by name (for a fit's provenance: ``GaussNewtonSettings``,

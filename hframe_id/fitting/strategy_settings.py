@@ -10,10 +10,10 @@ costs chi^2 / 2 (residuals in noise std), defects and misfits in noise std.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from hframe_id.errors import OptionError, shown
-from hframe_id.fitting.option_checks import as_tuple, nonnegative, positive
+from hframe_id.fitting.option_checks import as_tuple, check_numbers, positive
 
 #: Fields that are whole numbers.
 _COUNTS = (
@@ -93,14 +93,10 @@ class StrategySettings:
     hopeless_std: float = 1.0
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            name, value = f"strategy.{f.name}", getattr(self, f.name)
-            if f.name == "restart_factors":
-                self._check_restart_factors(name, value)
-            elif f.name in _MAY_BE_ZERO:
-                nonnegative(name, value, integer=f.name in _COUNTS)
-            else:
-                positive(name, value, integer=f.name in _COUNTS)
+        check_numbers(
+            self, "strategy", counts=_COUNTS, may_be_zero=_MAY_BE_ZERO, skip=("restart_factors",)
+        )
+        self._check_restart_factors("strategy.restart_factors", self.restart_factors)
 
     def _check_restart_factors(self, name: str, value) -> None:
         """``restart_factors``: at least one number > 1, stored as a tuple of floats."""
