@@ -1,7 +1,7 @@
 """One fit inside one box (``fitting.local_fit``): the rules between its stages, each on
-hand-made inputs. The misfit judgement, the identifiability holds (``fitting.holds``), the
-coordinates no output measures (``fitting.unmeasured``) and the strategy's list of stages;
-the stages themselves: test_stages.py; whole fits: integration/."""
+hand-made inputs. The misfit judgement, the coordinates no output measures
+(``fitting.unmeasured``) and the strategy's list of stages; the identifiability holds:
+test_holds.py; the stages themselves: test_stages.py; whole fits: integration/."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hframe_id.fitting import FitOptions, holds, local_fit, unmeasured
-from hframe_id.fitting.fit_run import FitRun, Fitted
+from hframe_id.fitting import FitOptions, local_fit, unmeasured
+from hframe_id.fitting.fit_run import Fitted
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.parameters import load_parameter_file
@@ -67,82 +67,6 @@ def test_a_failed_fit_keeps_its_message_and_gets_its_misfit(small_result):
     judged = _judged(small_result(success=False, message="stalled"))
     assert (judged.success, judged.message) == (False, "stalled")
     assert judged.diagnostics.residual_rms_sensor_std == pytest.approx(6.0, rel=1e-12)
-
-
-# --- the identifiability holds ---------------------------------------------------------
-
-
-def _holds(monkeypatch, rounds, prior=(0.0, 0.0, 0.0), converged=True, rms=1.0):
-    """``hold_unidentified`` on free parameters a, b, c whose relative standard errors are
-    ``rounds[0]`` at the fit and ``rounds[k]`` (of the parameters still active) after the
-    k-th solve again; returns (held, the active flags and theta of each solve again)."""
-    stats = [
-        SimpleNamespace(
-            relative_std=np.array(r),
-            relative_std_gn=np.array(r) / 2,
-            collinearity=np.full(len(r), 0.9),
-        )
-        for r in rounds
-    ]
-    resolved = []
-    cost = SimpleNamespace(cost=0.0)  # the residual rms is ``rms`` whatever the cost
-
-    def resolve(theta, active):
-        resolved.append((active.tolist(), theta.tolist()))
-        return SimpleNamespace(active=active, theta=theta, evaluation=cost), None
-
-    monkeypatch.setattr(FitRun, "statistics", lambda run, gn, state: stats[len(resolved)])
-    problem = SimpleNamespace(
-        free=(0, 1, 2), free_names=("a", "b", "c"), prior_weight=np.array(prior)
-    )
-    ms = SimpleNamespace(residual_rms=lambda cost: rms)
-    state = SimpleNamespace(
-        active=np.ones(3, dtype=bool), theta=np.array([0.1, 0.2, 0.3]), evaluation=cost
-    )
-    stages = [SimpleNamespace(converged=converged)]
-    options = FitOptions(identifiability_threshold=0.1)
-    run = FitRun(problem, options, ms, None, None, None, None, 0.0, stages)
-    held = holds.hold_unidentified(run, Fitted(state, None, stats[0]), resolve).held
-    return held, resolved
-
-
-def test_the_worst_parameter_is_held_first_and_the_rest_solved_again(monkeypatch):
-    """c (200 %) is held first, at its initial value (theta 0); then b (30 % after that
-    solve); a (5 %) stays free."""
-    held, resolved = _holds(monkeypatch, [[0.05, 0.5, 2.0], [0.05, 0.3], [0.05]])
-    assert list(held) == ["c", "b"]
-    assert held["c"] == (2.0, 1.0, 0.9) and held["b"] == (0.3, 0.15, 0.9)
-    assert resolved == [
-        ([True, True, False], [0.1, 0.2, 0.0]),
-        ([True, False, False], [0.1, 0.0, 0.0]),
-    ]
-
-
-def test_parameters_the_data_plainly_do_not_determine_are_held_together(monkeypatch):
-    """Over 100 % (``StrategySettings.hopeless_std``) b and c are held at once with the worst,
-    in one solve."""
-    held, resolved = _holds(monkeypatch, [[0.05, 1.5, 2.0], [0.05]])
-    assert set(held) == {"b", "c"}
-    assert [active for active, _ in resolved] == [[True, False, False]]
-
-
-def test_a_parameter_with_a_prior_is_never_held(monkeypatch):
-    held, resolved = _holds(monkeypatch, [[0.05, 0.08, 5.0]], prior=(0.0, 0.0, 1.0))
-    assert held == {} and resolved == []
-
-
-@pytest.mark.parametrize(("rms", "holds"), [(1.2, True), (2.0, False)])
-def test_an_unconverged_fit_holds_only_at_the_noise_level(monkeypatch, rms, holds):
-    """Below ``StrategySettings.hold_misfit`` = 1.5 noise std a sloppy direction is the likely
-    reason for the stall (holding helps); above it the errors mean nothing and nothing is
-    held."""
-    held, _ = _holds(monkeypatch, [[0.05, 0.05, 0.5], [0.05, 0.05]], converged=False, rms=rms)
-    assert bool(held) is holds
-
-
-def test_holding_the_last_free_parameter_solves_nothing_again(monkeypatch):
-    held, resolved = _holds(monkeypatch, [[2.0, 3.0, 4.0]])
-    assert set(held) == {"a", "b", "c"} and resolved == []
 
 
 # --- coordinates no output measures ----------------------------------------------------
