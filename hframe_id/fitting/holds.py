@@ -48,6 +48,10 @@ def hold_unidentified(
         # The worst first (fixing one of a collinear pair can identify the other), together
         # with every parameter the data plainly do not determine (relative std > 100 %).
         hold = {worst} | set(np.flatnonzero(judged > strategy.hopeless_std).tolist())
+        if len(hold) == len(active_idx):
+            # Nothing would be left to fit: the parameters stay free at their fitted values
+            # and the report's statistics say how poorly the data determine them.
+            break
         active = state.active.copy()
         theta = state.theta.copy()
         for k in sorted(hold):
@@ -59,8 +63,6 @@ def hold_unidentified(
             )
             active[index] = False
             theta[index] = 0.0
-        if not active.any():
-            break
         state, gn = resolve(theta, active)
         stats = run.statistics(gn, state)
     return Fitted(state, gn, stats, held)

@@ -92,9 +92,19 @@ def test_an_unconverged_fit_holds_only_at_the_noise_level(monkeypatch, rms, hold
     assert bool(held) is holds
 
 
-def test_holding_the_last_free_parameter_solves_nothing_again(monkeypatch):
-    held, resolved = _holds(monkeypatch, [[2.0, 3.0, 4.0]])
-    assert set(held) == {"a", "b", "c"} and resolved == []
+def test_parameters_are_not_reported_held_when_holding_would_leave_nothing_free(monkeypatch):
+    """All three over ``hopeless_std``: holding them would leave nothing to fit, so none is
+    held (the parameters keep their fitted values, reported as poorly determined) and
+    nothing is solved again."""
+    ended, given, resolved = _hold(monkeypatch, [[2.0, 3.0, 4.0]])
+    assert ended.held == {} and resolved == []
+    assert ended.state is given.state
+
+
+def test_the_last_free_parameter_is_not_held(monkeypatch):
+    """c is held, then a and b would both be: they stay free."""
+    held, resolved = _holds(monkeypatch, [[0.05, 0.5, 2.0], [1.5, 3.0]])
+    assert list(held) == ["c"] and len(resolved) == 1
 
 
 def test_a_parameter_is_held_by_its_place_among_those_still_free(monkeypatch):
