@@ -23,6 +23,7 @@ from hframe_id.fitting.progress import labelled
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
+from hframe_id.fitting.stages import estimate_states
 from hframe_id.fitting.statistics import Statistics, compute_statistics
 
 
@@ -61,6 +62,24 @@ class FitRun:
         with the options' tuning (``FitOptions.gauss_newton``), reporting to ``progress``;
         ``freeze_sloppy``: parameters the data do not determine are held still."""
         return GaussNewton(ms, self.progress, freeze_sloppy, self.options.gauss_newton)
+
+    def estimate_states(
+        self,
+        ms: MultipleShooting,
+        nodes: np.ndarray,
+        theta: np.ndarray,
+        active: np.ndarray,
+        stages: list[StageReport],
+    ) -> tuple[np.ndarray, float]:
+        """``stages.estimate_states`` on ``ms`` at the log-parameters ``theta`` held, by an
+        iteration with this run's settings, its evaluations counted; its stage reported to
+        ``stages``. Returns (the nodes, their penalty merit)."""
+        solver = self.solver(ms)
+        estimated = estimate_states(
+            solver, nodes, self.velocity, theta, active, stages, self.options.strategy
+        )
+        self.add_evaluations(solver.evaluations)
+        return estimated
 
     def statistics(self, solver: GaussNewton, state: SolverState) -> Statistics:
         """The statistics at ``state`` by the ``FitOptions.uncertainty`` method, from the

@@ -50,7 +50,7 @@ from hframe_id.fitting.progress import progress_sink
 from hframe_id.fitting.replayed_rest import replays_rest, solve_from_replayed_rest
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
-from hframe_id.fitting.stages import equation_error_report, estimate_states
+from hframe_id.fitting.stages import equation_error_report
 from hframe_id.fitting.unmeasured import restarts_along_unmeasured_springs, unmeasured_coordinates
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -317,11 +317,7 @@ def _start(run: FitRun, prepass: bool) -> np.ndarray:
         # unmeasured coordinate on the rigid motion) the truth itself can lose to a
         # poorer regression (docs/fitting.md, "One-axis").
         active0 = np.ones(n_free, dtype=bool)
-        trials = [
-            estimate_states(run.solver(ms), nodes, velocity, th, active0, [], run.options.strategy)
-            for th in (theta, regressed)
-        ]
-        costs = [merit for _, merit in trials]
+        costs = [run.estimate_states(ms, nodes, th, active0, [])[1] for th in (theta, regressed)]
     else:
         probe = ms.subset(np.arange(ms.n_windows), linked=False)
         smoothing = run.problem.smoothing
@@ -329,7 +325,7 @@ def _start(run: FitRun, prepass: bool) -> np.ndarray:
             probe.evaluate(nodes, th, smoothing, velocity_hint=velocity, derivatives=False).cost
             for th in (theta, regressed)
         ]
-    run.add_evaluations(2)
+        run.add_evaluations(2)
     used = bool(np.isfinite(costs[1]) and costs[1] < costs[0])
     run.stages.append(equation_error_report(seconds + time.perf_counter() - start, used))
     return regressed if used else theta

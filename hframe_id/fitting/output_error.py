@@ -21,7 +21,7 @@ from hframe_id.fitting.fit_run import FitRun
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.solvers import solver_named
-from hframe_id.fitting.stages import estimate_states, exact_stage, penalty_stage
+from hframe_id.fitting.stages import exact_stage, penalty_stage
 
 DEFERRED_STAGE = "all windows: deferred to the noise rounds"
 
@@ -53,9 +53,7 @@ def solve(
     theta = theta.copy()
     nodes = run.nodes
     if prepass:
-        nodes, _ = estimate_states(
-            run.solver(ms), nodes, velocity, theta, active, run.stages, options.strategy
-        )
+        nodes, _ = run.estimate_states(ms, nodes, theta, active, run.stages)
     measured = nodes
     nodes = nodes.copy()
     # Stages on the windows where something moves: they carry the dynamics, and leaving out
@@ -86,9 +84,7 @@ def solve(
         # discontinuous trajectory, and the noise rounds would estimate the noise from it
         # (realistic one-axis plant 2: defects of 79 sensor std, noise 33 sensor std where
         # continuous trajectories are at 0.2-3 rad) and stall (docs/fitting.md).
-        nodes, _ = estimate_states(
-            run.solver(ms), nodes, velocity, theta, active, run.stages, options.strategy
-        )
+        nodes, _ = run.estimate_states(ms, nodes, theta, active, run.stages)
     gn = run.solver(ms, freeze_sloppy=True)
     if mismatch:
         state = SolverState(nodes, theta, active.copy(), velocity_hint=velocity)
@@ -181,6 +177,7 @@ def _defer(run: FitRun, ms: MultipleShooting, state: SolverState, moving_rms: fl
     (``noise_rounds.estimate_noise``), which start from ``state``."""
     smoothing = run.problem.smoothing
     state.evaluation = ms.evaluate(state.nodes, state.theta, smoothing, velocity_hint=run.velocity)
+    run.add_evaluations(1)
     run.stages.append(
         StageReport(
             name=DEFERRED_STAGE,

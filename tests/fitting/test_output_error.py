@@ -142,3 +142,21 @@ def test_a_failed_all_window_stage_falls_back_to_a_penalty_from_the_measured_nod
     assert kinds == ["exact", "penalty", "exact"]
     assert _names(at) == ["moving windows", "all windows", "penalty", "all windows"]
     assert np.array_equal(calls[1][2], at.nodes) and calls[2][1] is calls[1][1]
+
+
+@pytest.mark.parametrize("defer", [False, True])
+def test_every_model_evaluation_is_counted(run, monkeypatch, defer):
+    """The run's counter holds the evaluations of every iteration the stages built (the
+    pre-pass's state estimates among them), plus the deferral's one evaluation."""
+    built = []
+    make_solver = FitRun.solver
+
+    def recording(self, ms, freeze_sloppy=False):
+        built.append(make_solver(self, ms, freeze_sloppy))
+        return built[-1]
+
+    monkeypatch.setattr(FitRun, "solver", recording)
+    at = run(strategy=TINY_MISMATCH)
+    output_error.solve(at, START, np.ones(3, dtype=bool), prepass=True, defer_on_mismatch=defer)
+    assert sum(gn.evaluations > 0 for gn in built) >= 2  # a state estimate, the moving windows
+    assert at.counter["evaluations"] == sum(gn.evaluations for gn in built) + int(defer)
