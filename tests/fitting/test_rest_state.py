@@ -94,6 +94,34 @@ def test_a_sample_with_fewer_valid_positions_than_rigid_modes_keeps_the_previous
     np.testing.assert_allclose(positions[[1, 2, 4, 5]], poses[[1, 2, 4, 5]], rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("at_rest", [True, False])
+def test_samples_that_place_nothing_are_left_out_of_the_start(h_frame, at_rest):
+    """The first three samples with no valid output (a logger starting late): at rest the
+    start is the mean of samples 3-9, else sample 3's pose; not zero, nor pulled towards
+    zero by the samples left out."""
+    model, p, modes, c, data = h_frame
+    amplitudes = AMPLITUDES + np.outer(np.arange(data.n_samples), [1e-3, 2e-3])
+    poses = amplitudes @ modes.T
+    data = _measuring(data, poses, c, at_rest)
+    valid = data.valid.copy()
+    valid[:3] = False
+    data = dataclasses.replace(data, valid=valid)
+    unheld = measured_positions(model, p, data, hold_missing=False)
+    assert np.isnan(unheld[:3]).all() and np.isfinite(unheld[3:]).all()
+    expected = poses[3:REST_SAMPLES].mean(axis=0) if at_rest else poses[3]
+    np.testing.assert_allclose(rest_state(model, p, data)[:4], expected, rtol=0, atol=1e-12)
+
+
+def test_a_record_whose_first_samples_place_nothing_starts_at_its_first_that_does(h_frame):
+    model, p, modes, c, data = h_frame
+    poses = np.tile(modes @ AMPLITUDES, (data.n_samples, 1))
+    data = _measuring(data, poses, c)
+    valid = data.valid.copy()
+    valid[: REST_SAMPLES + 5] = False
+    x0 = rest_state(model, p, dataclasses.replace(data, valid=valid))
+    np.testing.assert_allclose(x0[:4], poses[0], rtol=0, atol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def servo(tmp_path_factory):
     """(model, p, a record as a ``Dataset``) of the shipped DC servo: a tachometer (omega, a
