@@ -6,8 +6,11 @@ and what a set of settings changes from its defaults.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import fields
 from typing import Any
+
+import numpy as np
 
 from hframe_id.errors import OptionError, shown
 
@@ -15,20 +18,29 @@ from hframe_id.errors import OptionError, shown
 def positive(name: str, value: Any, integer: bool = False) -> None:
     """``value`` is a finite number > 0 (a whole number with ``integer``; never a bool)."""
     _number(name, value, integer)
-    if not (math.isfinite(value) and value > 0):
+    _finite(name, value, "> 0")
+    if not value > 0:
         raise OptionError(f"{name} must be > 0, got {shown(value)}")
 
 
 def nonnegative(name: str, value: Any, integer: bool = False) -> None:
     """``value`` is a finite number >= 0 (a whole number with ``integer``; never a bool)."""
     _number(name, value, integer)
-    if not (math.isfinite(value) and value >= 0):
+    _finite(name, value, ">= 0")
+    if not value >= 0:
         raise OptionError(f"{name} must be >= 0, got {shown(value)}")
 
 
+def _finite(name: str, value: Any, bound: str) -> None:
+    """``value`` (a number) is finite, else an error saying it must be ``bound`` too."""
+    if not math.isfinite(value):
+        raise OptionError(f"{name} must be a finite number {bound}, got {shown(value)}")
+
+
 def _number(name: str, value: Any, integer: bool) -> None:
-    """``value`` is a number (a whole one with ``integer``), not a bool."""
-    kind = int if integer else (int, float)
+    """``value`` is a number (a whole one with ``integer``: Python's or NumPy's), not a
+    bool."""
+    kind = numbers.Integral if integer else numbers.Real
     if isinstance(value, bool) or not isinstance(value, kind):
         raise OptionError(
             f"{name} must be a {'whole ' if integer else ''}number, got {shown(value)}"
@@ -87,10 +99,17 @@ def changed_fields(settings: Any) -> dict[str, Any]:
     ``StrategySettings``)."""
     default = type(settings)()
     return {
-        f.name: getattr(settings, f.name)
+        f.name: _plain(getattr(settings, f.name))
         for f in fields(settings)
         if getattr(settings, f.name) != getattr(default, f.name)
     }
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with NumPy numbers as Python's (a parameter file holds plain data)."""
+    if isinstance(value, tuple | list):
+        return type(value)(_plain(v) for v in value)
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def as_tuple(value: Any) -> tuple | None:

@@ -6,6 +6,7 @@ import math
 import re
 from dataclasses import dataclass
 
+import numpy as np
 import pytest
 
 from hframe_id.errors import OptionError
@@ -31,10 +32,10 @@ def _refused(message: str):
     [
         (positive, 0, "n must be > 0, got 0"),
         (positive, -1.5, "n must be > 0, got -1.5"),
-        (positive, math.nan, "n must be > 0, got nan"),
-        (positive, math.inf, "n must be > 0, got inf"),
+        (positive, math.nan, "n must be a finite number > 0, got nan"),
+        (positive, math.inf, "n must be a finite number > 0, got inf"),
         (nonnegative, -1, "n must be >= 0, got -1"),
-        (nonnegative, math.nan, "n must be >= 0, got nan"),
+        (nonnegative, math.inf, "n must be a finite number >= 0, got inf"),
         (fraction, 1.0, "n must be < 1, got 1.0"),
         (fraction, 0, "n must be > 0, got 0"),
     ],
@@ -124,3 +125,13 @@ def test_check_numbers_checks_each_field_by_its_kind_named_with_the_prefix(chang
 def test_changed_fields_are_those_that_differ_from_the_defaults():
     assert changed_fields(_Settings()) == {}
     assert changed_fields(_Settings(rate=0.5, count=4, label="x")) == {"count": 4, "label": "x"}
+
+
+def test_numpy_numbers_are_accepted_and_recorded_as_plain_data():
+    """A count computed with NumPy is a count; the provenance holds Python numbers (a
+    parameter file is written by ``yaml.safe_dump``, which refuses NumPy's)."""
+    positive("n", np.int64(3), integer=True)
+    nonnegative("n", np.float64(0.5))
+    changed = changed_fields(_Settings(rate=np.float64(0.25), count=np.int64(4)))
+    assert changed == {"rate": 0.25, "count": 4}
+    assert [type(v) for v in changed.values()] == [float, int]

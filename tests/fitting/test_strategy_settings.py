@@ -25,7 +25,7 @@ def test_defaults_are_recorded_as_default_and_a_change_by_name():
         ({"max_noise_rounds": 0}, "strategy.max_noise_rounds must be > 0, got 0"),
         ({"box_widenings": -1}, "strategy.box_widenings must be >= 0, got -1"),
         ({"box_widenings": 1.0}, "strategy.box_widenings must be a whole number, got 1.0"),
-        ({"noise_rtol": float("inf")}, "strategy.noise_rtol must be >= 0, got inf"),
+        ({"noise_rtol": float("inf")}, "strategy.noise_rtol must be a finite number >= 0, got inf"),
         ({"mismatch_rms": "3"}, "strategy.mismatch_rms must be a number, got '3'"),
         ({"restart_factors": (1.2, 0.8)}, "strategy.restart_factors must be factors > 1"),
         ({"restart_factors": ()}, "strategy.restart_factors must be a sequence of factors > 1"),
