@@ -66,8 +66,8 @@ class StrategySettings:
         envelope of masses and stiffnesses within 0.4-2.5 x.
     restart_factors, restart_limit, restart_min_gain : restarts along the stiffnesses at an
         unmeasured coordinate: each moved by x/÷ each factor (> 1), at most ``restart_limit``
-        solves, a restart kept when it lowers the cost by more than ``restart_min_gain``
-        (2: a likelihood ratio of e^2).
+        solves, a restart kept when it is a better fit by a log-likelihood ratio above
+        ``restart_min_gain`` (2: a likelihood ratio of e^2; ``unmeasured.likelihood_gain``).
     hold_misfit : an unconverged fit whose residual rms is above this many noise std is not
         worth holding parameters for identifiability (its error estimates mean nothing).
     hopeless_std : parameters whose relative standard error is above this are held together

@@ -49,9 +49,22 @@ def springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting)
     return [f for f, i in enumerate(problem.free) if i in coupled]
 
 
+def likelihood_gain(ms: MultipleShooting, before: float, after: float) -> float:
+    """The log-likelihood ratio of a fit whose cost (1/2 sum of squared weighted residuals)
+    fell from ``before`` to ``after``: the fall itself under the noise levels of the
+    weights, or, if smaller, n/2 log(before/after) under a common scale of the noise
+    estimated from the residuals (n of them): the two agree at the noise level, and far
+    above it (model mismatch) a fall of a few units is no evidence of a better mode."""
+    if not after > 0:
+        return before - after
+    half_n = before / ms.residual_rms(before) ** 2 if before > 0 else 0.0
+    return min(before - after, half_n * math.log(before / after))
+
+
 def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
     """Restarts from ``best`` with each free stiffness of a belt section at an unmeasured pulley
-    moved by x/÷ each of ``StrategySettings.restart_factors``; keeps the lowest converged cost,
+    moved by x/÷ each of ``StrategySettings.restart_factors``; keeps the lowest converged cost
+    where it is a better fit by more than ``restart_min_gain`` (``likelihood_gain``),
     repeated while it improves (at most ``restart_limit`` solves; a move already solved from the
     current best is not solved again: its solve is deterministic), and reports them as one stage.
     Also run when the fit has not converged: a converged restart replaces it.
@@ -87,7 +100,7 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
                 trial_state, trial_gn = solve(trial, theta, state.active.copy(), prepass=True)
                 tried += 1
                 iterations += sum(st.iterations for st in trial.stages)
-                gain = state.evaluation.cost - trial_state.evaluation.cost
+                gain = likelihood_gain(run.ms, state.evaluation.cost, trial_state.evaluation.cost)
                 if trial.stages[-1].converged and gain > strategy.restart_min_gain:
                     state, gn, final = trial_state, trial_gn, trial.stages[-1]
                     improved = True

@@ -1,9 +1,11 @@
 """Restarts along the springs at an unmeasured coordinate (``fitting.unmeasured``): the
 search over moves, with the solves replaced by a stand-in whose cost is known."""
 
+import math
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from hframe_id.fitting import FitOptions, unmeasured
 from hframe_id.fitting.fit_run import Fitted
@@ -35,7 +37,7 @@ def test_a_move_is_not_solved_twice_from_the_same_best(monkeypatch):
     run = SimpleNamespace(
         problem=problem,
         options=FitOptions(),  # the default restarts: x/÷1.18 and 1.4, at most 16
-        ms=None,
+        ms=SimpleNamespace(residual_rms=lambda cost: 1.0),  # at the noise level
         stages=[_report(cost=50.0)],
         trial=lambda label: SimpleNamespace(stages=[]),
         statistics=lambda gn, state: "statistics",
@@ -45,3 +47,17 @@ def test_a_move_is_not_solved_twice_from_the_same_best(monkeypatch):
     assert len(solved) == len(set(solved)) == 9
     assert fitted.state.evaluation.cost == 10.0
     assert "9 restarts" in run.stages[-1].message
+
+
+def test_a_fall_in_cost_is_judged_as_a_likelihood_ratio_at_the_fits_noise_level():
+    """At the noise level (rms 1: cost = n/2) the ratio is the fall in cost itself; far above
+    it (rms 100 under the weights: model mismatch) it is n/2 log(before/after), the fall
+    relative to the residuals' own level: 1,000 of a cost of 5e6 is no evidence, 5e5 is."""
+    ms = SimpleNamespace(residual_rms=lambda cost: math.sqrt(2 * cost / 1000))  # n = 1,000
+    assert unmeasured.likelihood_gain(ms, 500.0, 497.0) == pytest.approx(3.0, rel=1e-12)
+    assert unmeasured.likelihood_gain(ms, 5e6, 5e6 - 1e3) == pytest.approx(
+        500 * math.log(5e6 / (5e6 - 1e3)), rel=1e-12
+    )
+    assert unmeasured.likelihood_gain(ms, 5e6, 5e6 - 1e3) < 0.2
+    assert unmeasured.likelihood_gain(ms, 5e6, 4.5e6) > 50
+    assert unmeasured.likelihood_gain(ms, 500.0, 520.0) < 0
