@@ -31,7 +31,10 @@ def test_defaults_are_recorded_as_default_and_a_change_by_name():
         ({"give_up_decrease": 0}, "gauss_newton.give_up_decrease must be > 0, got 0"),
         ({"watchdog_patience": 2.5}, "gauss_newton.watchdog_patience must be a whole number"),
         ({"max_radius": True}, "gauss_newton.max_radius must be a number, got True"),
-        ({"sloppy_std": float("nan")}, "gauss_newton.sloppy_std must be a finite number > 0, got nan"),
+        (
+            {"sloppy_std": float("nan")},
+            "gauss_newton.sloppy_std must be a finite number > 0, got nan",
+        ),
         (
             {"min_radius": 5.0},
             "gauss_newton.min_radius must not exceed gauss_newton.max_radius, got 5.0 > 4.0",

@@ -69,7 +69,12 @@ BAD_LINK_FIELDS = [
         "continuity must be one of exact, none, got 'loose'",
     ),
     (TranscriptionOptions, "substep_safety", 0.5, "substep_safety must be >= 1, got 0.5"),
-    (TranscriptionOptions, "substep_safety", math.inf, "substep_safety must be a finite number > 0, got inf"),
+    (
+        TranscriptionOptions,
+        "substep_safety",
+        math.inf,
+        "substep_safety must be a finite number > 0, got inf",
+    ),
     (TranscriptionOptions, "max_substeps", 0, "max_substeps must be > 0, got 0"),
     (TranscriptionOptions, "threads", 1.5, "threads must be a whole number, got 1.5"),
     (SolverOptions, "solver", "newton", "solver must be one of gauss-newton, ipopt, sqpmethod"),
