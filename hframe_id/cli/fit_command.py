@@ -266,7 +266,26 @@ def _add_strategy_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_convergence_options(parser: argparse.ArgumentParser) -> None:
-    """When a stage has converged: iterations, step and defect tolerances."""
+    """When a stage has converged: iterations, step and defect tolerances; the tuning of the
+    Gauss-Newton iteration and of the stages."""
+    parser.add_argument(
+        "--gauss-newton",
+        action="append",
+        default=[],
+        metavar="SETTING=VALUE",
+        help="a setting of the Gauss-Newton iteration (repeatable; GaussNewtonSettings in "
+        "docs/api.md: trust region, node damping, watchdog, stall rules), recorded in the "
+        "parameter file's provenance",
+    )
+    parser.add_argument(
+        "--strategy",
+        action="append",
+        default=[],
+        metavar="SETTING=VALUE",
+        help="a setting of the stages (repeatable; StrategySettings in docs/api.md: "
+        "intermediate tolerances, noise rounds, box widenings, restarts, holds; a tuple as "
+        "comma-separated numbers), recorded in the parameter file's provenance",
+    )
     add_number(
         parser,
         "--max-iterations",

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import fields
 
 from hframe_id.errors import OptionError
+from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.strategy_settings import StrategySettings
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -29,11 +32,31 @@ def _float(text: str, what: str) -> float:
         raise OptionError(f"{what}: {text!r} is not a number") from None
 
 
-def _samples(text: str, what: str) -> int:
+def _whole(text: str, what: str, of: str = "") -> int:
     try:
         return int(text)
     except ValueError:
-        raise OptionError(f"{what}: {text!r} is not a whole number of samples") from None
+        raise OptionError(f"{what}: {text!r} is not a whole number{of}") from None
+
+
+def _settings(kind: type, items: list[str], flag: str):
+    """``kind`` (``GaussNewtonSettings`` or ``StrategySettings``) with the SETTING=VALUE
+    ``items`` given to ``flag`` in place of its defaults, each value read as its default
+    is (a whole number, a number, or comma-separated numbers for a tuple)."""
+    defaults = kind()
+    known = [f.name for f in fields(kind)]
+    changes = {}
+    for name, text in _pairs(items, flag).items():
+        if name not in known:
+            raise OptionError(f"{flag}: no setting {name!r} (settings: {', '.join(known)})")
+        default, what = getattr(defaults, name), f"{flag} {name}"
+        if isinstance(default, tuple):
+            changes[name] = tuple(_float(part, what) for part in _names(text))
+        elif isinstance(default, int):
+            changes[name] = _whole(text, what)
+        else:
+            changes[name] = _float(text, what)
+    return kind(**changes)
 
 
 def fit_options(args: argparse.Namespace) -> FitOptions:
@@ -66,7 +89,7 @@ def fit_options(args: argparse.Namespace) -> FitOptions:
         noise=args.noise,
         solver=args.solver,
         latency_samples={
-            name: _samples(value, f"--latency {name}")
+            name: _whole(value, f"--latency {name}", " of samples")
             for name, value in _pairs(args.latency, "--latency").items()
         },
         **{
@@ -91,6 +114,8 @@ def fit_options(args: argparse.Namespace) -> FitOptions:
         max_misfit=args.max_misfit,
         uncertainty=args.uncertainty,
         consider_method=args.consider_method,
+        gauss_newton=_settings(GaussNewtonSettings, args.gauss_newton, "--gauss-newton"),
+        strategy=_settings(StrategySettings, args.strategy, "--strategy"),
         verbose=0 if args.quiet else 1,
         **extra,
     )

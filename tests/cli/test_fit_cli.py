@@ -124,6 +124,11 @@ def test_a_fit_far_above_the_noise_level_fails(tmp_path, capsys):
         ([str(DATA), "--max-misfit", "0"], "--max-misfit must be > 0, got '0'"),
         ([str(DATA), "--initial", str(ROOT / "models" / "one-axis-table2.3.yaml")], "one-axis"),
         ([str(DATA), str(ROOT / "datasets" / "5V_oneaxis.mcap")], "one-axis"),
+        ([str(DATA), "--gauss-newton", "radius=2"], "--gauss-newton: no setting 'radius'"),
+        ([str(DATA), "--gauss-newton", "max_radius"], "must look like NAME=VALUE"),
+        ([str(DATA), "--strategy", "restart_limit=2.5"], "restart_limit: '2.5' is not a whole"),
+        ([str(DATA), "--strategy", "restart_factors=1.2,x"], "restart_factors: 'x' is not a"),
+        ([str(DATA), "--gauss-newton", "merit_rho=1"], "gauss_newton.merit_rho must be < 1"),
     ],
 )
 def test_bad_input_fails_before_solving_and_writes_nothing(tmp_path, capsys, args, message):
@@ -272,3 +277,29 @@ def test_json_says_where_the_fit_began_and_start_as_given_keeps_the_start(tmp_pa
     assert main([*argv, "--start-as-given"]) == 0
     began = json.loads(capsys.readouterr().out)["began_from"]
     assert began == {"label": "the start", "criteria": {}, "skipped": "off"}
+
+
+def test_tuning_settings_reach_the_fit_and_its_provenance():
+    """``--gauss-newton`` and ``--strategy`` give ``FitOptions`` their settings, each value
+    read as its default is (whole number, number, tuple); the parameter file's provenance
+    records what they change (``FitOptions.describe``)."""
+    from hframe_id.cli import build_parser
+    from hframe_id.cli.fit_options import fit_options
+
+    argv = [
+        "fit",
+        str(DATA),
+        "--gauss-newton",
+        "max_radius=2",
+        "--gauss-newton",
+        "watchdog_patience=7",
+        "--strategy",
+        "restart_factors=1.2,1.5",
+    ]
+    options = fit_options(build_parser("fit").parse_args(argv))
+    assert options.gauss_newton.max_radius == 2.0
+    assert options.gauss_newton.watchdog_patience == 7
+    assert options.strategy.restart_factors == (1.2, 1.5)
+    described = options.for_model("hframe-8").describe()
+    assert described["gauss_newton"] == {"max_radius": 2.0, "watchdog_patience": 7}
+    assert described["strategy"] == {"restart_factors": (1.2, 1.5)}
