@@ -524,22 +524,26 @@ class MultipleShooting(ShootingNodes):
         }
         if not derivatives:
             return parts
-        sens = out["sens"][t]
-        eye = np.eye(nx, nx + self.nf)[self._sens_rows]
-        eye = np.broadcast_to(eye, (len(xs), 1, *eye.shape))
-        sens_t = np.concatenate([eye, sens], axis=1)  # at samples 0..M-1
-        if self._output_index is not None:
-            jac = sens_t * weight[..., None]
-        else:
-            jac = np.einsum("wkjx,wkxd->wkjd", h_x, sens_t)
-            jac[..., nx:] += h_p[..., list(self.problem.free)]
-            jac *= weight[..., None]
-        slopes = self.problem.parameter_slopes(p)  # d p / d theta
-        end = out["end"][t]
-        parts["jac_node"] = jac[..., :nx]
-        parts["jac_theta"] = jac[..., nx:] * slopes
-        parts["a_end"] = end[:, :, :nx]
-        parts["b_end"] = end[:, :, nx:] * slopes
+        # Sensitivities that overflow once weighted (a parameter run far off: a stiff,
+        # unstable model) become inf / nan here, the solver's verdict on the step
+        # (``GaussNewton._linear_model``), not numpy warnings on the user's terminal.
+        with np.errstate(over="ignore", invalid="ignore"):
+            sens = out["sens"][t]
+            eye = np.eye(nx, nx + self.nf)[self._sens_rows]
+            eye = np.broadcast_to(eye, (len(xs), 1, *eye.shape))
+            sens_t = np.concatenate([eye, sens], axis=1)  # at samples 0..M-1
+            if self._output_index is not None:
+                jac = sens_t * weight[..., None]
+            else:
+                jac = np.einsum("wkjx,wkxd->wkjd", h_x, sens_t)
+                jac[..., nx:] += h_p[..., list(self.problem.free)]
+                jac *= weight[..., None]
+            slopes = self.problem.parameter_slopes(p)  # d p / d theta
+            end = out["end"][t]
+            parts["jac_node"] = jac[..., :nx]
+            parts["jac_theta"] = jac[..., nx:] * slopes
+            parts["a_end"] = end[:, :, :nx]
+            parts["b_end"] = end[:, :, nx:] * slopes
         return parts
 
     def _output_map(self, states: np.ndarray, inputs: np.ndarray, p: np.ndarray):

@@ -53,6 +53,18 @@ class StageReport:
     radius: float = math.nan
 
 
+def _norm(v: np.ndarray) -> float:
+    """|v|_2, also for finite entries whose squares overflow: ``np.linalg.norm`` (as
+    before, bit for bit) where that is finite, else scaled by the largest entry (a gradient
+    of 1e200 had a norm of inf, and the region's bisection returned a zero step)."""
+    with np.errstate(over="ignore"):
+        norm = float(np.linalg.norm(v))
+    scale = float(np.max(np.abs(v), initial=0.0))
+    if math.isfinite(norm) or not math.isfinite(scale):
+        return norm
+    return scale * float(np.linalg.norm(v / scale))
+
+
 def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.ndarray, bool]:
     """argmin g.d + d.H.d / 2 subject to |d|_2 <= radius (More-Sorensen, H = V E V^T >= 0).
 
@@ -68,14 +80,15 @@ def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.
         return -v @ (gv / (e + mu))
 
     full = step(0.0)
-    if np.linalg.norm(full) <= radius:
+    if _norm(full) <= radius:
         return full, True
     # |step(mu)| falls with mu and is <= |g| / mu: bisect log(mu) in (|g| / r * 1e-14, |g| / r].
-    hi = float(np.linalg.norm(g)) / radius
+    hi = _norm(g) / radius
     lo = hi * 1e-14
     for _ in range(200):
-        mid = math.sqrt(lo * hi)
-        if np.linalg.norm(step(mid)) > radius:
+        product = lo * hi  # the geometric mean, also where the product overflows
+        mid = math.sqrt(product) if math.isfinite(product) else math.sqrt(lo) * math.sqrt(hi)
+        if _norm(step(mid)) > radius:
             lo = mid
         else:
             hi = mid

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
-from hframe_id.fitting.solver import GaussNewton, SolverState, _penalty_parameter, _Walk
+from hframe_id.fitting.solver import (
+    GaussNewton,
+    SolverState,
+    _penalty_parameter,
+    _trust_region_step,
+    _Walk,
+)
 
 
 @pytest.mark.parametrize("rho", [GaussNewtonSettings.merit_rho, 0.5])
@@ -36,3 +42,40 @@ def test_overflowing_sensitivities_stop_the_step_without_numpy_warnings(shooting
         warnings.simplefilter("error")
         trial = gn._trial(walk, state, problem.smoothing, 1)
     assert trial.overflowed and not trial.accepted
+
+
+def test_a_gradient_whose_square_overflows_still_gets_a_step_on_the_region():
+    """A finite gradient of 1e200 (residuals far off at a sane curvature): its norm squared
+    overflows. The region's bisection used that inf and returned a zero step; the step is
+    on the region's edge, pointing down the gradient, and nothing is printed."""
+    h = np.diag([1.0, 4.0])
+    g = np.array([1e200, -3e200])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        d, full = _trust_region_step(h, g, 0.5)
+    assert not full
+    # The bisection stops at a relative width of 1e-6 in mu: the step's norm within that.
+    assert np.linalg.norm(d) == pytest.approx(0.5, rel=1e-5)
+    assert g @ d < 0
+
+
+def test_sensitivities_that_overflow_once_weighted_print_no_numpy_warning(
+    shooting_setup, monkeypatch
+):
+    """The weighted Jacobian of sensitivities near the float range is inf (the solver's
+    verdict on the step, above), computed without numpy RuntimeWarnings: a realistic
+    six-step fit printed them in `make bench`."""
+    problem, ms, nodes, _ = shooting_setup
+    integrate = ms._integrate_split
+
+    def huge(todo, nodes_, p, smoothing, plan, hint, out):
+        stiff = integrate(todo, nodes_, p, smoothing, plan, hint, out)
+        with np.errstate(over="ignore"):
+            out["sens"] *= 1e306
+        return stiff
+
+    monkeypatch.setattr(ms, "_integrate_split", huge)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ev = ms.evaluate(nodes, np.zeros(len(problem.free)), problem.smoothing)
+    assert not np.all(np.isfinite(ev.jac_theta))
