@@ -20,7 +20,8 @@ def _lines(path: Path) -> int:
 
 
 def test_no_module_is_over_600_lines():
-    long = {str(p.relative_to(ROOT)): _lines(p) for p in _modules() if _lines(p) > MAX_MODULE_LINES}
+    sizes = {str(p.relative_to(ROOT)): _lines(p) for p in _modules()}
+    long = {name: n for name, n in sizes.items() if n > MAX_MODULE_LINES}
     assert not long
 
 
