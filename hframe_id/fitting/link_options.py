@@ -158,7 +158,7 @@ class TranscriptionOptions:
     shooting_interval: int = DEFAULT_SHOOTING_INTERVAL
     continuity: str = DEFAULT_CONTINUITY
     substep_safety: float = 1.5
-    max_substeps: int = 200
+    max_substeps: int = 500
     threads: int = field(default_factory=default_threads)
     rest_start: str = "rigid"
 

@@ -169,7 +169,11 @@ class FitOptions:
         are not white). See ``hframe_id.fitting.statistics``.
     confidence : level of the reported intervals.
     substep_safety, max_substeps : RK4 substeps are chosen from the current parameters so
-        |lambda| h <= 2.785 / safety (see ``hframe_id.simulation.integrators``), capped.
+        |lambda| h <= 2.785 / safety (see ``hframe_id.simulation.integrators``), at most
+        ``max_substeps``; a point where stability alone (|lambda| h <= 2.785) needs more is
+        refused: no solver steps there, a start there fails saying so. The default 500
+        covers the envelope of issue 25 (Coulomb friction 10 x and inertia 0.5 x Table 4.2:
+        321 for stability, 481 with the safety 1.5, at 1 ms).
     threads : worker threads for evaluating shooting windows.
     rest_start : the first state of a record at rest. ``"rigid"`` (default): velocities zero,
         belts unstretched, the belt-free position estimated (``MultipleShooting.

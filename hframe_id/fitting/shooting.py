@@ -40,11 +40,7 @@ from hframe_id.fitting.link_options import TranscriptionOptions
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, output_matrix, rest_projector
 from hframe_id.fitting.shooting_nodes import ShootingNodes
-from hframe_id.simulation.integrators import (
-    MIN_SUBSTEPS,
-    RK4_STABILITY_LIMIT,
-    substeps_for_radius,
-)
+from hframe_id.fitting.substep_plan import plan_substeps
 
 #: Window groups are padded to a multiple of this, so mapped functions are reused.
 PAD = 16
@@ -296,36 +292,15 @@ class MultipleShooting(ShootingNodes):
 
     # ------------------------------------------------------------------ substeps
     def substep_plan(self, p: np.ndarray, smoothing: tuple[float, float]) -> dict:
-        """Fast and stiff substep counts and, per velocity state, the speed below which a
-        window needs the stiff count."""
-        options = self.transcription
-        jac = lambda x: self._jac_x(x, p, ca.DM(smoothing))  # noqa: E731
+        """Fast and stiff substep counts, per velocity state the speed below which a window
+        needs the stiff count, and whether the point is refused (stability at rest needs
+        more than ``max_substeps``: ``evaluate`` integrates nothing there)."""
+        jac = lambda x: np.array(self._jac_x(x, p, ca.DM(smoothing)))  # noqa: E731
         vs = np.array(
             [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.model.coordinates]
         )
         moving = np.concatenate([np.zeros(self.nq), 100.0 * vs])
-        a_rest = np.array(jac(np.zeros(self.nx)))
-        a_moving = np.array(jac(moving))
-        limit = RK4_STABILITY_LIMIT / options.substep_safety
-        radius_moving = float(np.max(np.abs(np.linalg.eigvals(a_moving))))
-        radius_rest = float(np.max(np.abs(np.linalg.eigvals(a_rest))))
-        safety, cap = options.substep_safety, options.max_substeps
-        # One rule (``substeps_for_radius``) for both counts. stiff: the simulators' count
-        # (``stable_substeps``: the same Jacobian at rest, bitwise), never fewer than fast and
-        # capped by the fit's max_substeps instead of 400; computed from a_rest, which the
-        # thresholds need anyway. fast: the rule at the moving Jacobian, a different quantity
-        # (the Coulomb slope there has decayed by sech^2(100) to nothing).
-        fast = substeps_for_radius(radius_moving, self.dt, safety, MIN_SUBSTEPS, cap)
-        stiff = substeps_for_radius(radius_rest, self.dt, safety, fast, cap)
-        # Coulomb part of each velocity's own rate: lambda_j sech^2(v / v_s).
-        lam = np.abs(np.diag(a_rest)[self.nq :] - np.diag(a_moving)[self.nq :])
-        h_fast = self.dt / fast
-        threshold = np.zeros(self.nq)
-        for j in range(self.nq):
-            ratio = 0.5 * limit / max(lam[j] * h_fast, 1e-300)  # factor 0.5: margin
-            if ratio < 1:
-                threshold[j] = vs[j] * math.acosh(1 / math.sqrt(ratio))
-        return {"fast": fast, "stiff": stiff, "threshold": threshold}
+        return plan_substeps(jac(np.zeros(self.nx)), jac(moving), vs, self.dt, self.transcription)
 
     def _needs_stiff(self, velocity: np.ndarray, threshold: np.ndarray) -> np.ndarray:
         """(W,) windows whose velocities (W, K, n_q) come near zero or change sign."""
@@ -438,6 +413,8 @@ class MultipleShooting(ShootingNodes):
         """
         p = self.problem.parameters(theta)
         plan = self._stage_plan(plan or self.substep_plan(p, smoothing))
+        if plan["refused"]:
+            return self._refused(plan, theta, derivatives)
         w, m, nx, nd = self.n_windows, self.m, self.nx, self.nx + self.nf
         todo = np.arange(w) if windows is None else np.asarray(windows)
         if velocity_hint is None:
@@ -470,6 +447,27 @@ class MultipleShooting(ShootingNodes):
             n_substeps=(plan["fast"], plan["stiff"]),
             n_stiff_windows=base.n_stiff_windows,
             prior_residual=prior,
+        )
+
+    def _refused(self, plan: dict, theta: np.ndarray, derivatives: bool) -> Evaluation:
+        """The evaluation of a point whose stiffness at rest needs more RK4 substeps for
+        stability than ``max_substeps`` allows: infinite residuals (every solver refuses a
+        step there, and a start there fails) and undefined derivatives, nothing integrated.
+        Integrating it would cost the stability count in every stiff window; integrating it
+        with fewer substeps would be unstable (``substeps_for_radius``)."""
+        w, m, nx, ny, nf = self.n_windows, self.m, self.nx, self.ny, self.nf
+        undefined = (lambda *shape: np.full(shape, np.nan)) if derivatives else (lambda *_: None)
+        return Evaluation(
+            residual=np.full((w, m, ny), np.inf),
+            jac_node=undefined(w, m, ny, nx),
+            jac_theta=undefined(w, m, ny, nf),
+            x_end=np.full((w, nx), np.nan),
+            a_end=undefined(w, nx, nx),
+            b_end=undefined(w, nx, nf),
+            states=np.full((w, m + 1, nx), np.nan),
+            n_substeps=(plan["fast"], plan["stiff"]),
+            n_stiff_windows=0,
+            prior_residual=self.problem.prior_weight * np.asarray(theta),
         )
 
     def _stage_plan(self, plan: dict) -> dict:

@@ -20,6 +20,7 @@ from hframe_id.fitting.condensed import CondensedModel
 from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.options import FitProgress
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
+from hframe_id.fitting.substep_plan import stopped_message
 
 
 @dataclass
@@ -270,10 +271,7 @@ class GaussNewton(CondensedModel):
                 self._accept(walk, state, trial, iterations)
             ev = state.evaluation
             if trial.overflowed:
-                message = (
-                    "stopped: the model's sensitivities overflow at these parameters (so stiff "
-                    "or unstable there that no step can be computed)"
-                )
+                message = stopped_message(ev.n_substeps[1], ms.transcription.max_substeps)
                 break
             max_defect = float(np.max(np.abs(ms.defects(ev, state.nodes, self.links)), initial=0))
             self._report_progress(stage, smoothing, iterations, ev, trial.step, max_defect, walk)

@@ -144,7 +144,8 @@ def stable_substeps(
     minimum: int = MIN_SUBSTEPS,
     cap: int = 400,
 ) -> int:
-    """RK4 substeps per sample so that |lambda_max| h <= 2.785 / safety, within [minimum, cap].
+    """RK4 substeps per sample so that |lambda_max| h <= 2.785 / safety, within [minimum, cap]
+    and never fewer than the stability count (``substeps_for_radius``).
 
     lambda_max is the spectral radius of df/dx at rest (``spectral_radius_at_rest``), where
     the smoothed Coulomb slope is steepest. ``safety`` 1.5 keeps the fast friction mode well
@@ -163,9 +164,19 @@ def substeps_for_radius(
     radius: float, dt: float, safety: float = 1.5, minimum: int = MIN_SUBSTEPS, cap: int = 400
 ) -> int:
     """Fewest RK4 substeps per sample of ``dt`` [s] with |lambda| h <= 2.785 / ``safety`` for
-    a spectral radius ``radius`` [1/s], within [``minimum``, ``cap``]."""
+    a spectral radius ``radius`` [1/s], within [``minimum``, ``cap``], and never fewer than
+    ``stability_substeps``: the cap limits the safety margin, not stability. (A cap below
+    the stability count made the linearised RK4 step grow by 1e100 over a window at a fit's
+    point: sensitivities of 1e144 and a "converged" fit with standard errors of 1e-126,
+    docs/studies/2026-11-27-fleet-fit-crawl-and-fleet-check.md.)"""
     needed = math.ceil(radius * dt * safety / RK4_STABILITY_LIMIT)
-    return int(min(max(needed, minimum), cap))
+    return int(max(min(max(needed, minimum), cap), stability_substeps(radius, dt)))
+
+
+def stability_substeps(radius: float, dt: float) -> int:
+    """Fewest RK4 substeps per sample of ``dt`` [s] with |lambda| h <= 2.785 for a spectral
+    radius ``radius`` [1/s]: below it the step amplifies the fastest mode."""
+    return max(1, math.ceil(radius * dt / RK4_STABILITY_LIMIT))
 
 
 @lru_cache(maxsize=256)

@@ -88,7 +88,7 @@ def test_the_strategys_own_settings_are_checked_in_one_line(kwargs, message):
 def test_each_component_reads_its_own_options():
     """The transcription and the problem builder get frozen parts of the flat FitOptions."""
     options = FitOptions(shooting_interval=25, continuity="none", bound_factor=3.0, threads=1)
-    assert options.transcription_options == TranscriptionOptions(25, "none", 1.5, 200, 1)
+    assert options.transcription_options == TranscriptionOptions(25, "none", 1.5, 500, 1)
     assert isinstance(options.problem_options, ProblemOptions)
     assert options.problem_options.bound_factor == 3.0
     assert options.solver_options.max_iterations == options.max_iterations

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
+from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import (
     GaussNewton,
     SolverState,
@@ -15,6 +16,7 @@ from hframe_id.fitting.solver import (
     _trust_region_step,
     _Walk,
 )
+from hframe_id.fitting.substep_plan import stopped_message
 
 
 @pytest.mark.parametrize("rho", [GaussNewtonSettings.merit_rho, 0.5])
@@ -42,6 +44,32 @@ def test_overflowing_sensitivities_stop_the_step_without_numpy_warnings(shooting
         warnings.simplefilter("error")
         trial = gn._trial(walk, state, problem.smoothing, 1)
     assert trial.overflowed and not trial.accepted
+
+
+def test_a_point_refused_for_its_stiffness_stops_the_stage_saying_why(shooting_setup):
+    """At a point whose friction at rest needs more RK4 substeps for stability than
+    max_substeps, the evaluation is refused (``MultipleShooting.evaluate``): no step can be
+    computed there, and the stage's reason names the count needed and the cap."""
+    problem, ms, nodes, _ = shooting_setup
+    cap = 10  # Table 4.2 needs 16-17 at rest (4.5e4 1/s at 1 ms)
+    refusing = MultipleShooting(
+        problem, transcription=dataclasses.replace(ms.transcription, max_substeps=cap)
+    ).uniform()
+    theta = np.zeros(len(problem.free))
+    gn = GaussNewton(refusing)
+    gn.set_smoothing(problem.smoothing)
+    ev = refusing.evaluate(nodes, theta, problem.smoothing)
+    state = SolverState(nodes, theta, np.ones(len(theta), dtype=bool), evaluation=ev)
+    walk = _Walk(refusing, gn.links, None, 0.5, False)
+    walk.best = (walk.merit(ev, nodes), nodes, theta, ev)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        trial = gn._trial(walk, state, problem.smoothing, 1)
+    assert trial.overflowed and not trial.accepted
+    needed = refusing.substep_plan(problem.p_initial, problem.smoothing)["stiff"]
+    assert needed > cap
+    message = stopped_message(ev.n_substeps[1], cap)
+    assert f"needs {needed} substeps per sample, more than max_substeps {cap}" in message
 
 
 def test_a_gradient_whose_square_overflows_still_gets_a_step_on_the_region():

@@ -15,6 +15,8 @@ can fail.
 """
 
 import copy
+import dataclasses
+import math
 from pathlib import Path
 
 import casadi as ca
@@ -29,7 +31,14 @@ from hframe_id.models import build_model
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.simulation.friction import friction_sites
-from hframe_id.simulation.integrators import rk4_step, stable_substeps
+from hframe_id.simulation.integrators import (
+    RK4_STABILITY_LIMIT,
+    rk4_step,
+    spectral_radius_at_rest,
+    stability_substeps,
+    stable_substeps,
+    substeps_for_radius,
+)
 from hframe_id.simulation.open_loop import simulate
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
@@ -237,6 +246,39 @@ def test_stiff_substeps_are_the_simulators(shooting):
             )
             assert plan["stiff"] == expected
     assert n_sub > 4
+
+
+@pytest.mark.parametrize("radius", [10.0, 4.5e4, 9.3e5, 1e7])
+def test_a_cap_never_takes_the_count_below_stability(radius):
+    # The cap limits the safety margin only: at every radius [1/s] the count keeps
+    # |lambda| h <= 2.785 (a rig-04 fit at 9.3e5 1/s, capped at 200 of the 334 needed, had
+    # transition matrices of radius 1e100), and below the cap it is the safe count.
+    dt = 1e-3
+    for cap in (4, 200, 400):
+        n = substeps_for_radius(radius, dt, 1.5, 4, cap)
+        assert radius * dt / n <= RK4_STABILITY_LIMIT
+        assert n == max(
+            min(max(math.ceil(radius * dt * 1.5 / RK4_STABILITY_LIMIT), 4), cap),
+            stability_substeps(radius, dt),
+        )
+    assert stability_substeps(9.3e5, dt) == 334
+
+
+def test_a_point_too_stiff_for_max_substeps_is_refused(shooting):
+    # With max_substeps one below the count stability needs at rest, the evaluation
+    # integrates nothing and is refused (infinite cost, undefined derivatives); with it
+    # equal, it is the ordinary evaluation (stable, the safety margin capped).
+    ms, theta, p, smoothing, n_sub, states = shooting
+    stable = stability_substeps(spectral_radius_at_rest(ms.model, p, smoothing), ms.dt)
+    assert 4 < stable < n_sub
+    for cap, refused in ((stable - 1, True), (stable, False)):
+        options = dataclasses.replace(ms.transcription, max_substeps=cap)
+        capped = MultipleShooting(ms.problem, transcription=options).uniform()
+        assert capped.substep_plan(p, smoothing)["refused"] is refused
+        nodes, _ = capped.initial_nodes(p)
+        ev = capped.evaluate(nodes, theta, smoothing)
+        assert bool(np.isfinite(ev.cost)) is not refused
+        assert bool(np.all(np.isnan(ev.jac_theta))) is refused
 
 
 def test_sim_rig_step_is_the_simulator(shooting):
