@@ -37,6 +37,7 @@ import numpy as np
 from hframe_id.errors import OptionError
 from hframe_id.fitting.kernel import compiled_state_substep, compiled_substep, window_function
 from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.fitting.substep_plan import stopped_message
 
 #: NLP solvers of the installed CasADi that this module drives.
 SOLVERS = ("ipopt", "sqpmethod")
@@ -472,7 +473,10 @@ def solve_nlp(
     active = np.asarray(active, dtype=bool)
     theta = np.asarray(theta, dtype=float).copy()
     nodes = np.asarray(nodes, dtype=float).copy()
-    n_sub = substeps or ms.substep_plan(problem.parameters(theta), smoothing)["stiff"]
+    plan = ms.substep_plan(problem.parameters(theta), smoothing)
+    if plan["refused"] and not substeps:
+        return _refused(nodes, theta, plan["stiff"], ms.transcription.max_substeps, start)
+    n_sub = substeps or plan["stiff"]
     build_time = 0.0
     iterations = 0
     for _ in range(MAX_REBUILDS + 1):
@@ -496,16 +500,20 @@ def solve_nlp(
         v = np.array(solution["x"]).ravel()
         nodes = v[: nodes.size].reshape(nodes.shape) * ms.defect_scale
         theta[active] = v[nodes.size :]
-        needed = ms.substep_plan(problem.parameters(theta), smoothing)["stiff"]
-        if needed <= n_sub:
+        plan = ms.substep_plan(problem.parameters(theta), smoothing)
+        needed = plan["stiff"]
+        if needed <= n_sub or plan["refused"]:
             break
         n_sub = needed
     defects = np.array(solution["g"]).ravel()[: nlp.n_defects]
+    message = str(stats["return_status"]).replace("_", " ")
+    if plan["refused"]:
+        message = stopped_message(needed, ms.transcription.max_substeps)
     return NlpOutcome(
         nodes=nodes,
         theta=theta,
         converged=bool(stats["success"]) and needed <= n_sub,
-        message=str(stats["return_status"]).replace("_", " "),
+        message=message,
         iterations=iterations,
         cost=float(solution["f"]),
         max_defect=float(np.max(np.abs(defects), initial=0.0)),
@@ -513,4 +521,21 @@ def solve_nlp(
         substeps=n_sub,
         build_time_s=build_time,
         small_step=stopped_on_small_step(settings, stats) and needed <= n_sub,
+    )
+
+
+def _refused(nodes, theta, needed: int, max_substeps: int, start: float) -> NlpOutcome:
+    """The outcome of a solve from a point refused for its stiffness (stability at rest
+    needs ``needed`` RK4 substeps, more than ``max_substeps``): nothing built or solved."""
+    return NlpOutcome(
+        nodes=nodes,
+        theta=theta,
+        converged=False,
+        message=stopped_message(needed, max_substeps),
+        iterations=0,
+        cost=float("inf"),
+        max_defect=float("nan"),
+        wall_time_s=time.perf_counter() - start,
+        substeps=needed,
+        build_time_s=0.0,
     )

@@ -51,6 +51,32 @@ def test_the_nlp_holds_a_record_at_rest_to_its_rigid_modes(table_and_step):
     assert not outcome.nodes[0, ms.nq :].any()
 
 
+def test_a_start_too_stiff_for_max_substeps_is_not_solved(table_and_step):
+    """With max_substeps below what stability needs at the start (Table 4.2: 16-17), the NLP
+    is neither built nor solved (its transcription would need that count in every window):
+    not converged, saying why, the start returned as given."""
+    import dataclasses
+
+    from hframe_id.fitting import FitOptions
+    from hframe_id.fitting.nlp import solve_nlp
+    from hframe_id.fitting.problem import build_problem
+    from hframe_id.fitting.shooting import MultipleShooting
+
+    table, step = table_and_step
+    problem = build_problem([step], table, FitOptions(free=("k_b", "M_cart")))
+    ms = MultipleShooting(problem).uniform()
+    refusing = MultipleShooting(
+        problem, transcription=dataclasses.replace(ms.transcription, max_substeps=10)
+    ).uniform()
+    nodes, _ = refusing.initial_nodes(problem.p_initial)
+    theta = np.zeros(2)
+    outcome = solve_nlp(refusing, nodes, theta, np.ones(2, dtype=bool), problem.smoothing)
+    assert not outcome.converged and outcome.iterations == 0
+    assert "more than max_substeps 10" in outcome.message
+    assert outcome.substeps > 10 and outcome.build_time_s == 0.0
+    np.testing.assert_array_equal(outcome.theta, theta)
+
+
 @pytest.mark.parametrize(
     ("solver", "status", "small"),
     [
