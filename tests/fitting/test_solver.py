@@ -27,22 +27,28 @@ def test_penalty_parameter_makes_every_full_step_predict_a_decrease(rho):
         assert mu * l1 - change >= rho * mu * l1 - 1e-9 * abs(change)
 
 
+def _first_trial(ms, nodes, ev, smoothing):
+    """The Gauss-Newton stage's first step from ``ev`` (at theta = 0), numpy warnings raised
+    as errors (the fit's command line showed every numpy RuntimeWarning)."""
+    theta = np.zeros(ms.nf)
+    gn = GaussNewton(ms)
+    gn.set_smoothing(smoothing)
+    state = SolverState(nodes, theta, np.ones(len(theta), dtype=bool), evaluation=ev)
+    walk = _Walk(ms, gn.links, None, 0.5, False)
+    walk.best = (walk.merit(ev, nodes), nodes, theta, ev)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return gn._trial(walk, state, smoothing, 1)
+
+
 def test_overflowing_sensitivities_stop_the_step_without_numpy_warnings(shooting_setup):
     """Sensitivities too large to square (a parameter run far off) make the linearisation
     non-finite: the step says so (``overflowed``, which ends the stage with that reason)
-    and nothing is printed (the fit's command line showed every numpy RuntimeWarning)."""
+    and nothing is printed."""
     problem, ms, nodes, _ = shooting_setup
-    theta = np.zeros(len(problem.free))
-    gn = GaussNewton(ms)
-    gn.set_smoothing(problem.smoothing)
-    ev = ms.evaluate(nodes, theta, problem.smoothing)
+    ev = ms.evaluate(nodes, np.zeros(len(problem.free)), problem.smoothing)
     huge = dataclasses.replace(ev, jac_theta=ev.jac_theta * 1e300)
-    state = SolverState(nodes, theta, np.ones(len(theta), dtype=bool), evaluation=huge)
-    walk = _Walk(ms, gn.links, None, 0.5, False)
-    walk.best = (walk.merit(huge, nodes), nodes, theta, huge)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        trial = gn._trial(walk, state, problem.smoothing, 1)
+    trial = _first_trial(ms, nodes, huge, problem.smoothing)
     assert trial.overflowed and not trial.accepted
 
 
@@ -55,16 +61,8 @@ def test_a_point_refused_for_its_stiffness_stops_the_stage_saying_why(shooting_s
     refusing = MultipleShooting(
         problem, transcription=dataclasses.replace(ms.transcription, max_substeps=cap)
     ).uniform()
-    theta = np.zeros(len(problem.free))
-    gn = GaussNewton(refusing)
-    gn.set_smoothing(problem.smoothing)
-    ev = refusing.evaluate(nodes, theta, problem.smoothing)
-    state = SolverState(nodes, theta, np.ones(len(theta), dtype=bool), evaluation=ev)
-    walk = _Walk(refusing, gn.links, None, 0.5, False)
-    walk.best = (walk.merit(ev, nodes), nodes, theta, ev)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        trial = gn._trial(walk, state, problem.smoothing, 1)
+    ev = refusing.evaluate(nodes, np.zeros(len(problem.free)), problem.smoothing)
+    trial = _first_trial(refusing, nodes, ev, problem.smoothing)
     assert trial.overflowed and not trial.accepted
     needed = refusing.substep_plan(problem.p_initial, problem.smoothing)["stiff"]
     assert needed > cap
