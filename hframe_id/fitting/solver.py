@@ -22,6 +22,9 @@ from hframe_id.fitting.options import FitProgress
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
 from hframe_id.fitting.substep_plan import stopped_message
 
+#: A free log-parameter this close to a bound is on it (rounding of the projection).
+AT_BOUND = 1e-9
+
 
 @dataclass
 class SolverState:
@@ -584,10 +587,10 @@ class GaussNewton(CondensedModel):
         )
 
     def _at_bound(self, state: SolverState) -> list[int]:
-        """Indices of the active free parameters at a bound (within 1e-9)."""
+        """Indices of the active free parameters at a bound (within ``AT_BOUND``)."""
         lo, hi = self.problem.theta_lower, self.problem.theta_upper
         return [
             int(i)
             for i in np.flatnonzero(state.active)
-            if state.theta[i] <= lo[i] + 1e-9 or state.theta[i] >= hi[i] - 1e-9
+            if state.theta[i] <= lo[i] + AT_BOUND or state.theta[i] >= hi[i] - AT_BOUND
         ]

@@ -20,6 +20,7 @@ from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.output_error import solve
 from hframe_id.fitting.problem import FitProblem
 from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.fitting.solver import AT_BOUND
 
 
 def measured_coordinates(ms: MultipleShooting) -> np.ndarray:
@@ -65,8 +66,10 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
     """Restarts from ``best`` with each free stiffness of a belt section at an unmeasured pulley
     moved by x/÷ each of ``StrategySettings.restart_factors``; keeps the lowest converged cost
     where it is a better fit by more than ``restart_min_gain`` (``likelihood_gain``),
-    repeated while it improves (at most ``restart_limit`` solves; a move already solved from the
-    current best is not solved again: its solve is deterministic), and reports them as one stage.
+    repeated while it improves (at most ``restart_limit`` solves), and reports them as one stage.
+    A move is where the box leaves the stiffness (a move past a bound stops at it): one that
+    leaves it where it is (the stiffness on that bound) is no restart, and one already solved
+    from the current best is not solved again (its solve is deterministic).
     Also run when the fit has not converged: a converged restart replaces it.
 
     Each restart is one ``output_error.solve`` (with the state-estimation pre-pass) from the
@@ -78,24 +81,29 @@ def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:
     start = time.perf_counter()
     tried = iterations = 0
     improved = True
-    since_improved = set()  # (index, factor) solved from the current best: not again
+    since_improved = set()  # (index, log-stiffness) solved from the current best: not again
     while improved and tried < strategy.restart_limit:
         improved = False
         for index in springs:
             for factor in (f**sign for f in strategy.restart_factors for sign in (1, -1)):
+                moved = float(
+                    np.clip(
+                        state.theta[index] + math.log(factor),
+                        problem.theta_lower[index],
+                        problem.theta_upper[index],
+                    )
+                )
                 if (
                     not state.active[index]
                     or tried >= strategy.restart_limit
-                    or (index, factor) in since_improved
+                    or abs(moved - state.theta[index]) <= AT_BOUND
+                    or (index, moved) in since_improved
                 ):
                     continue
-                since_improved.add((index, factor))
+                since_improved.add((index, moved))
                 theta = state.theta.copy()
-                theta[index] = np.clip(
-                    theta[index] + math.log(factor),
-                    problem.theta_lower[index],
-                    problem.theta_upper[index],
-                )
+                theta[index] = moved
+                factor = math.exp(moved - state.theta[index])  # as the box left the move
                 trial = run.trial(f"restart {tried + 1}, {problem.free_names[index]} x{factor:.3g}")
                 trial_state, trial_gn = solve(trial, theta, state.active.copy(), prepass=True)
                 tried += 1

@@ -49,6 +49,41 @@ def test_a_move_is_not_solved_twice_from_the_same_best(monkeypatch):
     assert "9 restarts" in run.stages[-1].message
 
 
+def test_a_move_the_box_stops_is_solved_once_and_none_at_the_bound(monkeypatch):
+    """k2 on its lower bound, k3 0.1 below its upper one (log): k2's two lowering moves leave
+    it on the bound (no restart), k3's raising moves x1.18 (0.166) and x1.4 (0.336) both stop
+    at the bound (one restart). Nothing improves: 2 + 1 + 2 = 5 solves, where solving each
+    factor took 8 (three of them from the start's own point or twice from one)."""
+    solved = []
+
+    def solve(trial, theta, active, prepass):
+        solved.append(theta.copy())
+        trial.stages.append(_report(cost=100.0))
+        return SolverState(None, theta, active, SimpleNamespace(cost=100.0)), "solver"
+
+    monkeypatch.setattr(unmeasured, "solve", solve)
+    monkeypatch.setattr(unmeasured, "springs_at_unmeasured_coordinates", lambda problem, ms: [0, 1])
+    problem = SimpleNamespace(
+        free_names=("k2", "k3"), theta_lower=np.array([0.0, -9.0]), theta_upper=np.array([9, 0.1])
+    )
+    labels = []
+    run = SimpleNamespace(
+        problem=problem,
+        options=FitOptions(),
+        ms=SimpleNamespace(residual_rms=lambda cost: 1.0),
+        stages=[_report(cost=50.0)],
+        trial=lambda label: labels.append(label) or SimpleNamespace(stages=[]),
+        statistics=lambda gn, state: "statistics",
+    )
+    start = SolverState(None, np.zeros(2), np.ones(2, bool), SimpleNamespace(cost=50.0))
+    unmeasured.restarts_along_unmeasured_springs(run, Fitted(start, "solver", None))
+    moves = sorted((int(np.flatnonzero(t)[0]), round(float(t[t != 0][0]), 12)) for t in solved)
+    k2_up = [(0, round(math.log(f), 12)) for f in (1.18, 1.4)]
+    k3_down = [(1, round(-math.log(f), 12)) for f in (1.18, 1.4)]
+    assert moves == sorted([*k2_up, (1, 0.1), *k3_down])
+    assert "k3 x1.11" in labels[2]  # the move as the bound left it: e^0.1
+
+
 def test_a_fall_in_cost_is_judged_as_a_likelihood_ratio_at_the_fits_noise_level():
     """At the noise level (rms 1: cost = n/2) the ratio is the fall in cost itself; far above
     it (rms 100 under the weights: model mismatch) it is n/2 log(before/after), the fall
