@@ -22,6 +22,8 @@ import time
 import warnings
 from dataclasses import replace
 
+import numpy as np
+
 from hframe_id.errors import FitError
 from hframe_id.fitting.dataset import Dataset, check_excitation
 from hframe_id.fitting.estimates import at_bound_clause
@@ -45,6 +47,7 @@ from hframe_id.fitting.start_screen import (
     known_candidates,
     screen_start,
 )
+from hframe_id.fitting.stiffness_wall import wall_parameters
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -85,6 +88,7 @@ def fit_recordings(
         result = _portfolio(recordings, screen.parameters, options, screen.criterion)
     else:
         result = _fit_widening(recordings, screen.parameters, options, screen.criterion)
+    result = _off_the_wall(recordings, screen.parameters, options, screen.criterion, result)
     if screen.moved:
         result = replace(result, message=f"{result.message}; {screen.statement()}")
     result = result.with_diagnostics(start_screen=screen)
@@ -239,6 +243,59 @@ def _fit_widening(
         + "; ".join(end.statement() for end in ends)
         + "); "
         + result.message,
+    )
+
+
+def _off_the_wall(
+    recordings, start: ParameterSet, options: FitOptions, judge, result: FitResult
+) -> FitResult:
+    """``result``, or where it ended against the stiffness wall (``stiffness_wall``: some
+    coordinate's Coulomb rate at rest so high that ``max_substeps`` caps its integration), a
+    fit restarted once from its end with the parameters that set those rates
+    (``wall_parameters``) back at ``start``'s values, the better of the two by the first's
+    criterion. Still against the wall, a failure saying so: ``max_substeps``, not the data,
+    decided those parameters. (The heavy dev plant's fit walked both motor inertias down to
+    the wall, 1.8e-6 kg m^2, held-out motor-angle rms 4.4 x the reduction's; restarted with
+    them at the start's 1.1e-4 it ended at 0.66 x: docs/studies/.) A prediction-error fit
+    (continuity "none") has no simulation criterion to judge a restart by: it only says so."""
+    names = _at_the_wall(result, recordings)
+    if names and options.continuity == "exact":
+        moved = {n: float(start.values[n]) for n in names}
+        again = _fit_widening(recordings, result.parameters.replace_values(**moved), options, judge)
+        first, second = judged(
+            [("fit", result), ("restart", again)], Criterion.of(result, recordings)
+        )
+        restarted = (
+            f"restarted with {', '.join(names)} at the start's values after ending against "
+            f"the stiffness wall (simulation criterion {second.criterion:.6g} against "
+            f"{first.criterion:.6g})"
+        )
+        if second.criterion < first.criterion:
+            result = _started_from(again, result.initial)
+        result = replace(result, message=f"{result.message}; {restarted}")
+        names = _at_the_wall(result, recordings)
+    if not names or not result.success:
+        return result
+    return replace(
+        result,
+        success=False,
+        message=f"max_substeps decided the answer: {', '.join(names)} ended where the "
+        f"friction at rest is so stiff that a stable integration needs more substeps than "
+        f"max_substeps {options.max_substeps} allows with its safety margin (the data pull "
+        f"them further; a start closer to the rig, or fixing them, decides instead); "
+        + result.message,
+    )
+
+
+def _at_the_wall(result: FitResult, recordings) -> tuple[str, ...]:
+    """``stiffness_wall.wall_parameters`` at ``result``'s end point."""
+    problem = result.problem
+    model = problem.model
+    p = np.array([result.parameters.values[spec.name] for spec in model.parameters])
+    smoothing = result.options.smoothing or model.options.smoothing
+    dt = recordings[0].sample_period_s
+    return wall_parameters(
+        model, p, problem.free_names, smoothing, dt, result.options.transcription_options
     )
 
 

@@ -20,7 +20,9 @@ from hframe_id.fitting.condensed import CondensedModel
 from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.options import FitProgress
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
+from hframe_id.fitting.stiffness_wall import StiffnessWall, step_on_wall
 from hframe_id.fitting.substep_plan import stopped_message
+from hframe_id.fitting.trust_region import trust_region_step
 
 #: A free log-parameter this close to a bound is on it (rounding of the projection).
 AT_BOUND = 1e-9
@@ -55,50 +57,6 @@ class StageReport:
     at_bound: list[int] = field(default_factory=list)
     substeps: tuple[int, int] = (0, 0)
     radius: float = math.nan
-
-
-def _norm(v: np.ndarray) -> float:
-    """|v|_2, also for finite entries whose squares overflow: ``np.linalg.norm`` (as
-    before, bit for bit) where that is finite, else scaled by the largest entry (a gradient
-    of 1e200 had a norm of inf, and the region's bisection returned a zero step)."""
-    with np.errstate(over="ignore"):
-        norm = float(np.linalg.norm(v))
-    scale = float(np.max(np.abs(v), initial=0.0))
-    if math.isfinite(norm) or not math.isfinite(scale):
-        return norm
-    return scale * float(np.linalg.norm(v / scale))
-
-
-def _trust_region_step(h: np.ndarray, g: np.ndarray, radius: float) -> tuple[np.ndarray, bool]:
-    """argmin g.d + d.H.d / 2 subject to |d|_2 <= radius (More-Sorensen, H = V E V^T >= 0).
-
-    Returns the step and whether it is the full Gauss-Newton step (region inactive).
-    """
-    if g.size == 0:
-        return np.zeros(0), True
-    e, v = np.linalg.eigh(h)
-    e = np.maximum(e, 1e-14 * max(float(e[-1]), 1e-300))
-    gv = v.T @ g
-
-    def step(mu: float) -> np.ndarray:
-        return -v @ (gv / (e + mu))
-
-    full = step(0.0)
-    if _norm(full) <= radius:
-        return full, True
-    # |step(mu)| falls with mu and is <= |g| / mu: bisect log(mu) in (|g| / r * 1e-14, |g| / r].
-    hi = _norm(g) / radius
-    lo = hi * 1e-14
-    for _ in range(200):
-        product = lo * hi  # the geometric mean, also where the product overflows
-        mid = math.sqrt(product) if math.isfinite(product) else math.sqrt(lo) * math.sqrt(hi)
-        if _norm(step(mid)) > radius:
-            lo = mid
-        else:
-            hi = mid
-        if hi <= lo * (1 + 1e-6):
-            break
-    return step(hi), False
 
 
 def _penalty_parameter(mu: float, change: float, l1: float, rho: float) -> float:
@@ -339,6 +297,7 @@ class GaussNewton(CondensedModel):
         free = state.active.copy()
         index = np.flatnonzero(free)
         damping_used = None
+        wall = None
         while walk.radius >= settings.min_radius and self.node_damping <= settings.max_node_damping:
             key = (self.node_damping, self.prox_scale)
             if damping_used != key:
@@ -350,6 +309,9 @@ class GaussNewton(CondensedModel):
             d, out.full_step = self._bounded_step(
                 h_red, g_red, state.theta[index], lo[index], hi[index], walk.radius
             )
+            if wall is not None and wall.crossed_by(d):
+                d, out.full_step = step_on_wall(h_red, g_red, wall, walk.radius)
+                d = np.clip(state.theta[index] + d, lo[index], hi[index]) - state.theta[index]
             dnodes, change = complete(d)
             dtheta = np.zeros_like(state.theta)
             dtheta[index] = d
@@ -367,6 +329,9 @@ class GaussNewton(CondensedModel):
             else:
                 walk.predicted = -change
             trial = self._evaluate(state, nodes_new, theta_new, smoothing)
+            if wall is None and trial.n_substeps[1] > ms.transcription.max_substeps:
+                wall = StiffnessWall.at(ms, state.theta, index, smoothing)
+                continue
             new = walk.merit(trial, nodes_new)
             current, predicted = out.current, walk.predicted
             ratio = (current - new) / predicted if predicted > 0 else -1.0
@@ -445,7 +410,7 @@ class GaussNewton(CondensedModel):
             else np.ones(len(theta_f), dtype=bool)
         )
         for _ in range(len(theta_f) + 1):
-            d_sub, full_step = _trust_region_step(h_red[np.ix_(sub, sub)], g_red[sub], radius)
+            d_sub, full_step = trust_region_step(h_red[np.ix_(sub, sub)], g_red[sub], radius)
             d = np.zeros(len(theta_f))
             d[sub] = d_sub
             out = sub & (

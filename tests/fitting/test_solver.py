@@ -13,10 +13,10 @@ from hframe_id.fitting.solver import (
     GaussNewton,
     SolverState,
     _penalty_parameter,
-    _trust_region_step,
     _Walk,
 )
 from hframe_id.fitting.substep_plan import stopped_message
+from hframe_id.fitting.trust_region import trust_region_step
 
 
 @pytest.mark.parametrize("rho", [GaussNewtonSettings.merit_rho, 0.5])
@@ -78,7 +78,7 @@ def test_a_gradient_whose_square_overflows_still_gets_a_step_on_the_region():
     g = np.array([1e200, -3e200])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        d, full = _trust_region_step(h, g, 0.5)
+        d, full = trust_region_step(h, g, 0.5)
     assert not full
     # The bisection stops at a relative width of 1e-6 in mu: the step's norm within that.
     assert np.linalg.norm(d) == pytest.approx(0.5, rel=1e-5)

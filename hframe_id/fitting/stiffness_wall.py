@@ -1,0 +1,161 @@
+"""The stiffness wall as a constraint of the Gauss-Newton step.
+
+A point whose friction at rest is so stiff that a stable RK4 integration needs more than
+``max_substeps`` substeps per sample is refused (``MultipleShooting.evaluate``): the
+integrator's domain ends there. Refused trials alone only shrink the trust region, so a fit
+whose descent points beyond that wall walks into it with ever shorter steps and stops
+against it, its answer decided by ``max_substeps`` (J_M1 1.84e-6 kg m^2 at 500, 4.59e-6 at
+200, Table 4.2's 1.12e-4: docs/studies/2026-11-27-seeded-starts-and-the-stiffness-wall.md).
+
+Here the wall is what a bound is to the box: a constraint the step respects. Once a trial
+from a point is refused, the wall is linearised there in the log of the spectral radius at
+rest, rho (the quantity that sets the substeps, ``substeps_for_radius``):
+
+    log rho(theta + d) ~ log rho(theta) + n . d <= log rho_wall,
+    rho_wall = (max_substeps - 1/2) * 2.785 / dt  [1/s]
+
+(half a substep inside the wall, where the stability count, an integer, is not decided by
+rounding)
+and the step is the Gauss-Newton step within the trust region on that half-space: where the
+unconstrained step crosses it, the minimiser on the hyperplane n . d = log rho_wall -
+log rho(theta) (one linear equality eliminated, ``step_on_wall``). The iterate then slides
+along the wall while the data pull it there, and leaves it when they pull it back.
+
+A fit that ends there has had its answer decided by ``max_substeps``, as a fit ending on a
+default bound has by the box. ``wall_parameters`` names the free parameters that put it
+there: those that set the Coulomb rate at rest of a coordinate stiff enough on its own that
+the substep count is capped rather than set by the safety margin
+(``substeps_for_radius``); the strategy restarts them (``fit._off_the_wall``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from hframe_id.fitting.trust_region import trust_region_step
+from hframe_id.models import Model
+from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT, spectral_radius_at_rest
+
+#: Forward-difference step in theta for n: sqrt(machine epsilon), the step that balances
+#: truncation against rounding for a function of O(1) arguments computed to full precision
+#: (the eigenvalues of df/dx at rest are).
+DIFFERENCE_STEP = math.sqrt(np.finfo(float).eps)
+#: An elasticity d log(rate) / d log(p) below this is rounding, not dependence: the forward
+#: difference's rounding error is about DIFFERENCE_STEP, and a parameter the rate depends
+#: on moves it in proportion (the Coulomb rate tau_c / (v_s J): elasticities +1 and -1).
+DEPENDENCE = math.sqrt(DIFFERENCE_STEP)
+
+
+@dataclass(frozen=True)
+class StiffnessWall:
+    """The wall linearised at one point: ``normal`` (n_free,) d log rho / d theta over the
+    step's free parameters, ``margin`` log rho_wall - log rho at the point (> 0 at any point
+    that was integrated)."""
+
+    normal: np.ndarray
+    margin: float
+
+    @classmethod
+    def at(cls, ms, theta: np.ndarray, index: np.ndarray, smoothing) -> StiffnessWall:
+        """The wall of ``ms`` (``MultipleShooting``: its model, sample period and
+        ``max_substeps``) linearised at ``theta`` over the free parameters ``index``."""
+        problem = ms.problem
+
+        def log_radius(th: np.ndarray) -> float:
+            p = problem.parameters(th)
+            return math.log(spectral_radius_at_rest(ms.model, p, smoothing))
+
+        here = log_radius(theta)
+        normal = np.empty(len(index))
+        for k, i in enumerate(index):
+            moved = theta.copy()
+            moved[i] += DIFFERENCE_STEP
+            normal[k] = (log_radius(moved) - here) / DIFFERENCE_STEP
+        # Half a substep inside the wall: the count is an integer (ceil), so a step aimed at
+        # the wall itself is refused or not by the rounding of its last digits.
+        cap = ms.transcription.max_substeps - 0.5
+        return cls(normal=normal, margin=math.log(cap * RK4_STABILITY_LIMIT / ms.dt) - here)
+
+    def crossed_by(self, d: np.ndarray) -> bool:
+        """Whether the step ``d`` crosses the linearised wall."""
+        return float(self.normal @ d) > self.margin
+
+
+def step_on_wall(
+    h: np.ndarray, g: np.ndarray, wall: StiffnessWall, radius: float
+) -> tuple[np.ndarray, bool]:
+    """argmin g.d + d.H.d / 2 subject to n . d = margin and |d|_2 <= radius: (step, whether
+    the trust region left it whole). d = d0 + Z z with d0 the shortest step onto the
+    hyperplane and Z an orthonormal basis of its directions; the solver's own subproblem
+    (``trust_region_step``) in z, within what the region leaves beyond d0. A
+    hyperplane farther than ``radius``: the step towards it, cut at the region."""
+    n = wall.normal
+    nn = float(n @ n)
+    if nn == 0.0:  # the free parameters do not move the stiffness: nothing to respect
+        return trust_region_step(h, g, radius)
+    d0 = n * (wall.margin / nn)
+    left = radius**2 - float(d0 @ d0)
+    if left <= 0.0:
+        return d0 * (radius / math.sqrt(float(d0 @ d0))), False
+    # Q of [n, I]: its first column is n's direction, the others span the hyperplane.
+    q, _ = np.linalg.qr(np.column_stack([n, np.eye(len(n))]))
+    z_basis = q[:, 1 : len(n)]
+    z, whole = trust_region_step(z_basis.T @ h @ z_basis, z_basis.T @ (h @ d0 + g), math.sqrt(left))
+    return d0 + z_basis @ z, whole
+
+
+@lru_cache(maxsize=32)
+def _state_jacobian(model: Model) -> ca.Function:
+    """A(x, p, s) = df/dx at inputs 0 (built once per model)."""
+    x = ca.SX.sym("x", model.n_states)
+    p = ca.SX.sym("p", len(model.parameters))
+    s = ca.SX.sym("s", 2)
+    f = model.dynamics(x, ca.DM.zeros(model.n_inputs), p, s)
+    return ca.Function("state_jacobian", [x, p, s], [ca.jacobian(f, x)])
+
+
+def coulomb_rates(model: Model, p: np.ndarray, smoothing) -> np.ndarray:
+    """(n_q,) each velocity's Coulomb rate at rest [1/s]: its own rate df_v/dv at rest less
+    that at 100 smoothing velocities, where the smoothed Coulomb slope has decayed
+    (``substep_plan.plan_substeps`` reads the same difference)."""
+    jac = _state_jacobian(model)
+    nq = model.n_states // 2
+    vs = np.array([smoothing[0] if c.unit == "m" else smoothing[1] for c in model.coordinates])
+    moving = np.concatenate([np.zeros(nq), 100.0 * vs])
+    s = ca.DM(smoothing)
+    rest = np.diag(np.array(jac(np.zeros(model.n_states), p, s)))[nq:]
+    fast = np.diag(np.array(jac(moving, p, s)))[nq:]
+    return np.abs(rest - fast)
+
+
+def wall_parameters(
+    model: Model, p: np.ndarray, free_names, smoothing, dt: float, transcription
+) -> tuple[str, ...]:
+    """The free parameters (of ``free_names``) that set the Coulomb rate at rest of a
+    coordinate whose rate alone caps the RK4 substeps at all parameters ``p`` (SI, model
+    order): rate * dt * safety / 2.785 > max_substeps (``transcription``), so that
+    ``max_substeps``, not the safety margin, sets the count. Empty where no coordinate is
+    that stiff. A parameter sets a rate when the rate's elasticity to it exceeds
+    ``DEPENDENCE``."""
+    limit = transcription.max_substeps * RK4_STABILITY_LIMIT / (dt * transcription.substep_safety)
+    rates = coulomb_rates(model, p, smoothing)
+    capped = rates > limit
+    if not capped.any():
+        return ()
+    names = [spec.name for spec in model.parameters]
+    out = []
+    for name in free_names:
+        i = names.index(name)
+        if p[i] == 0.0:
+            continue
+        moved = p.copy()
+        moved[i] *= 1.0 + DIFFERENCE_STEP
+        ratio = coulomb_rates(model, moved, smoothing)[capped] / rates[capped]
+        if np.any(np.abs(np.log(ratio)) > DEPENDENCE * DIFFERENCE_STEP):
+            out.append(name)
+    return tuple(out)

@@ -1,0 +1,203 @@
+"""The stiffness wall as a constraint of the Gauss-Newton step, and the parameters that put
+a fit against it (``fitting.stiffness_wall``)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from hframe_id.fitting import FitOptions
+from hframe_id.fitting.link_options import TranscriptionOptions
+from hframe_id.fitting.problem import build_problem, default_free
+from hframe_id.fitting.shooting import MultipleShooting
+from hframe_id.fitting.solver import GaussNewton, SolverState
+from hframe_id.fitting.stiffness_wall import (
+    StiffnessWall,
+    coulomb_rates,
+    step_on_wall,
+    wall_parameters,
+)
+from hframe_id.models import build_model
+from hframe_id.recordings.simulated import simulate_recording
+from hframe_id.simulation.integrators import (
+    RK4_STABILITY_LIMIT,
+    spectral_radius_at_rest,
+    stability_substeps,
+)
+from hframe_id.simulation.open_loop import simulate
+
+
+def test_the_step_on_the_wall_is_the_minimiser_on_its_hyperplane():
+    """min |d - (1, 0)|^2 / 2 on d1 + d2 = 0: d = (1/2, -1/2) (the projection of the
+    unconstrained minimiser onto the hyperplane), inside a region it does not reach."""
+    h = np.eye(2)
+    g = np.array([-1.0, 0.0])
+    d, whole = step_on_wall(h, g, StiffnessWall(np.array([1.0, 1.0]), 0.0), radius=10.0)
+    np.testing.assert_allclose(d, [0.5, -0.5], atol=1e-12)
+    assert whole
+
+
+def test_the_step_on_the_wall_meets_the_margin_and_the_region():
+    """A curved model, a wall at margin 0.3 along n = (2, -1, 0): the step ends on it
+    (n . d = 0.3), is no longer than the region, and no point of the hyperplane within the
+    region has a lower model value (checked on 2,000 seeded draws)."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(3, 3))
+    h = a @ a.T + 0.1 * np.eye(3)
+    g = np.array([-3.0, 2.0, 1.0])
+    wall = StiffnessWall(np.array([2.0, -1.0, 0.0]), 0.3)
+    radius = 0.8
+    d, _ = step_on_wall(h, g, wall, radius)
+    assert wall.normal @ d == pytest.approx(0.3, abs=1e-12)
+    assert np.linalg.norm(d) <= radius * (1 + 1e-9)
+
+    def model(x):
+        return g @ x + 0.5 * x @ h @ x
+
+    n = wall.normal / np.linalg.norm(wall.normal)
+    d0 = n * 0.3 / np.linalg.norm(wall.normal)
+    basis = np.linalg.svd(n[None, :])[2][1:]
+    # Draws on the hyperplane inside the region; the bisection that sizes the region's
+    # step stops at 1e-6 relative, so the step may be beaten by that much, no more.
+    z = rng.normal(size=(2000, 2)) * 0.5
+    points = d0 + z @ basis
+    inside = points[np.linalg.norm(points, axis=1) <= radius]
+    assert len(inside) > 100
+    assert model(d) <= min(model(x) for x in inside) + 1e-6 * abs(model(d))
+
+
+def test_a_wall_beyond_the_region_gives_the_step_towards_it():
+    """The hyperplane farther than the region: the step goes straight to it, cut at the
+    region's edge."""
+    wall = StiffnessWall(np.array([0.0, 3.0]), 6.0)  # the hyperplane d2 = 2
+    d, whole = step_on_wall(np.eye(2), np.array([1.0, 1.0]), wall, radius=0.5)
+    np.testing.assert_allclose(d, [0.0, 0.5])
+    assert not whole
+
+
+def test_a_step_that_stays_on_its_side_does_not_cross():
+    wall = StiffnessWall(np.array([1.0, -1.0]), 0.2)
+    assert not wall.crossed_by(np.array([0.1, -0.05]))
+    assert wall.crossed_by(np.array([0.3, 0.0]))
+
+
+@pytest.fixture(scope="module")
+def hframe(table):
+    model = build_model(table.variant)
+    p = np.array([table.values[spec.name] for spec in model.parameters])
+    return model, p, [spec.name for spec in model.parameters]
+
+
+def test_a_motors_coulomb_rate_at_rest_is_its_friction_over_smoothing_and_inertia(hframe):
+    """The H-frame model's motor velocity row (eq. 3.10, friction eq. 3.6 smoothed by tanh(v /
+    v_s)): its own rate at rest less that in motion is tau_c / (v_s J), to rounding."""
+    model, p, names = hframe
+    vs = model.options.smoothing
+    rates = coulomb_rates(model, p, vs)
+    motors = [i for i, c in enumerate(model.coordinates) if c.unit == "rad"]
+    assert len(motors) == 2
+    for k, i in enumerate(motors, start=1):
+        tau, inertia = p[names.index(f"tau_cM{k}")], p[names.index(f"J_M{k}")]
+        assert rates[i] == pytest.approx(tau / (vs[1] * inertia), rel=1e-9)
+
+
+def test_no_parameter_is_at_the_wall_at_table_4_2(hframe):
+    model, p, _ = hframe
+    free = default_free(model)
+    assert (
+        wall_parameters(model, p, free, model.options.smoothing, 1e-3, TranscriptionOptions()) == ()
+    )
+
+
+def test_a_motor_whose_rate_caps_the_substeps_names_its_friction_and_inertia(hframe):
+    """Motor 1's inertia lowered until its Coulomb rate alone needs the cap's substeps with
+    the safety margin (the other motor well below): its J_M1 and tau_cM1 are the
+    parameters at the wall, nothing else; a parameter held fixed is not named."""
+    model, p, names = hframe
+    options = TranscriptionOptions()
+    vs = model.options.smoothing
+    limit = options.max_substeps * RK4_STABILITY_LIMIT / (1e-3 * options.substep_safety)
+    i = names.index("J_M1")
+    tau = p[names.index("tau_cM1")]
+    at_wall = p.copy()
+    at_wall[i] = tau / (vs[1] * limit) / 1.01  # 1 % beyond the capped band's edge
+    free = default_free(model)
+    assert wall_parameters(model, at_wall, free, vs, 1e-3, options) == ("J_M1", "tau_cM1")
+    fixed = [n for n in free if n != "tau_cM1"]
+    assert wall_parameters(model, at_wall, fixed, vs, 1e-3, options) == ("J_M1",)
+    below = p.copy()
+    below[i] = tau / (vs[1] * limit) * 1.01
+    assert wall_parameters(model, below, free, vs, 1e-3, options) == ()
+
+
+def test_the_linearised_wall_of_a_fit_has_the_coulomb_elasticities(shooting_setup):
+    """With motor 1's inertia halved, its Coulomb mode is the fastest at rest: the wall's
+    normal in log-parameters is -1 along J_M1 and tau_c's share of the damping along
+    tau_cM1 (the rate is (B + tau_c / v_s) / J), about 0 along the other motor's, and the
+    margin is log(rho_wall / rho) for a wall half a substep inside max_substeps. (At Table
+    4.2 itself the two motors' rates are close and the fastest mode is shared.)"""
+    problem, ms, _, _ = shooting_setup
+    names = problem.free_names
+    index = np.arange(len(names))
+    theta = np.zeros(len(index))
+    theta[names.index("J_M1")] = -np.log(2.0)
+    wall = StiffnessWall.at(ms, theta, index, problem.smoothing)
+    normal = dict(zip(names, wall.normal, strict=True))
+    # Forward differences at sqrt(eps): about 1e-8 of rounding. The eigenvalue is the
+    # diagonal's rate only to within the belts' coupling of the modes (1.1e-4 on tau_cM1
+    # here): 1e-3.
+    assert normal["J_M1"] == pytest.approx(-1.0, abs=1e-3)
+    # tau_c's share of the motor's damping at rest, (tau_c / v_s) / (B + tau_c / v_s).
+    values = problem.initial.values
+    coulomb = values["tau_cM1"] / problem.smoothing[1]
+    assert normal["tau_cM1"] == pytest.approx(coulomb / (values["B_M1"] + coulomb), abs=1e-3)
+    assert abs(normal["J_M2"]) < 1e-3
+    rho = spectral_radius_at_rest(ms.model, problem.parameters(theta), problem.smoothing)
+    rho_wall = (ms.transcription.max_substeps - 0.5) * RK4_STABILITY_LIMIT / ms.dt
+    assert wall.margin == pytest.approx(np.log(rho_wall / rho), rel=1e-12)
+
+
+def test_a_step_refused_for_stiffness_slides_along_the_wall(table):
+    """Motor 1's inertia started 3 x above a plant's, with ``max_substeps`` so low that
+    the plant's value is beyond the wall (stability at rest needs 17 substeps there, 9 are
+    allowed): the Gauss-Newton steps that head for it are refused, and the stage's next
+    iterate is the step constrained to the wall, which ends on it (its stability count
+    the cap's), not a region cut tenfold that leaves it short of the wall."""
+    plant = table.replace_values(J_M2=table.values["J_M2"] * 3)  # motor 2 never the wall
+    u = np.zeros((400, 2))
+    u[50:300] = (-4.0, 2.0)
+    rec = simulate_recording(plant, u, seed=4)
+    start = plant.replace_values(J_M1=table.values["J_M1"] * 3)
+    problem = build_problem([rec], start, FitOptions(free=("J_M1", "k_b", "M_cart", "B_M1")))
+    cap = 9
+    ms = MultipleShooting(
+        problem,
+        transcription=dataclasses.replace(TranscriptionOptions(), max_substeps=cap),
+    ).uniform()
+    states = simulate(
+        ms.model, problem.p_initial, problem.experiments[0].inputs, 1e-3, n_substeps=cap
+    )
+    gn = GaussNewton(ms)
+    refused, accepted = [], []
+    evaluate, accept = gn._evaluate, gn._accept
+
+    def counting(state, nodes, theta, smoothing):
+        ev = evaluate(state, nodes, theta, smoothing)
+        refused.append(ev.n_substeps[1] > cap)
+        return ev
+
+    def keeping(walk, state, trial, iterations):
+        accepted.append((len(refused), trial.theta.copy()))
+        return accept(walk, state, trial, iterations)
+
+    gn._evaluate, gn._accept = counting, keeping
+    state = SolverState(states[ms.window_start], np.zeros(ms.nf), np.ones(ms.nf, dtype=bool))
+    gn.run(state, "wall", problem.smoothing, 3, 1e-6, 1e-3)
+    k = next(i for i, (n, _) in enumerate(accepted) if any(refused[:n]))
+    before = accepted[k - 1][1] if k else np.zeros(ms.nf)
+    after = accepted[k][1]
+    # The region was 1 (it doubles from 0.5 after a long first step); a refusal alone cut
+    # it tenfold, to 0.1, and the step with it (0.009 on the code before the wall).
+    assert np.max(np.abs(after - before)) > 0.1
+    rho = spectral_radius_at_rest(ms.model, problem.parameters(after), problem.smoothing)
+    assert stability_substeps(rho, ms.dt) == cap
