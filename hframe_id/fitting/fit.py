@@ -261,29 +261,35 @@ def _off_the_wall(
     names = _at_the_wall(result, recordings)
     if names and options.continuity == "exact":
         moved = {n: float(start.values[n]) for n in names}
-        again = _fit_widening(recordings, result.parameters.replace_values(**moved), options, judge)
+        progress = progress_sink(options)
+        label = "restart off the stiffness wall"
+        named = replace(options, progress=labelled(progress, label)) if progress else options
+        again = _fit_widening(recordings, result.parameters.replace_values(**moved), named, judge)
         first, second = judged(
             [("fit", result), ("restart", again)], Criterion.of(result, recordings)
         )
         restarted = (
             f"restarted with {', '.join(names)} at the start's values after ending against "
-            f"the stiffness wall (simulation criterion {second.criterion:.6g} against "
-            f"{first.criterion:.6g})"
+            f"the stiffness wall (criterion {second.criterion:.6g} against {first.criterion:.6g})"
         )
         if second.criterion < first.criterion:
             result = _started_from(again, result.initial)
         result = replace(result, message=f"{result.message}; {restarted}")
         names = _at_the_wall(result, recordings)
-    if not names or not result.success:
+    if not names:
         return result
+    wall = (
+        f"{', '.join(names)} ended where the friction at rest is so stiff that a stable "
+        f"integration needs more substeps than max_substeps {options.max_substeps} allows "
+        "with its safety margin"
+    )
+    if not result.success:
+        return replace(result, message=f"{result.message}; {wall}")
     return replace(
         result,
         success=False,
-        message=f"max_substeps decided the answer: {', '.join(names)} ended where the "
-        f"friction at rest is so stiff that a stable integration needs more substeps than "
-        f"max_substeps {options.max_substeps} allows with its safety margin (the data pull "
-        f"them further; a start closer to the rig, or fixing them, decides instead); "
-        + result.message,
+        message=f"max_substeps decided the answer: {wall} (the data pull them further; a "
+        f"start closer to the rig, or fixing them, decides instead); {result.message}",
     )
 
 

@@ -1,6 +1,8 @@
 """The fit's entry point (``fitting.fit.fit_recordings``): problems refused before solving."""
 
+import dataclasses
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -20,8 +22,6 @@ def test_fit_recordings_raises_before_solving(table, recording):
 def _boxed_result(boxed, options):
     """A stand-in for ``fit_in_box``'s result: ``boxed`` on the default box; parameter
     ``b`` a friction term (nonnegative) below its start, ``m`` a mass (positive) above."""
-    from types import SimpleNamespace
-
     spec = [
         SimpleNamespace(name="b", kind="nonnegative"),
         SimpleNamespace(name="m", kind="positive"),
@@ -60,3 +60,97 @@ def test_opening_friction_to_zero_does_not_use_up_a_widening(monkeypatch):
         (100.0, ("b",), True),
         (1e4, ("b",), False),
     ]
+
+
+@dataclasses.dataclass
+class _Ended:
+    """A stand-in for a ``FitResult`` as ``fit._off_the_wall`` reads it."""
+
+    parameters: object
+    initial: object
+    success: bool = True
+    message: str = "converged"
+
+
+def _wall_strategy(monkeypatch, table, restart_criterion, restart_at_wall):
+    """``fit._off_the_wall`` with its fits and criterion stubbed: the first fit ends at
+    criterion 100 with J_M1 and tau_cM1 at the wall; the restart ends at
+    ``restart_criterion``, at the wall or not. Returns (first, restart, calls): the starts
+    the restart was given."""
+    from hframe_id.fitting import fit as fit_module
+
+    end = table.replace_values(J_M1=1e-6, tau_cM1=0.03, k_b=9000.0)
+    first = _Ended(end, table)
+    restart = _Ended(table.replace_values(k_b=8500.0), table, message="restart converged")
+    calls = []
+
+    def at_the_wall(result, recordings):
+        ended = result.parameters
+        at = ended is first.parameters or (ended is restart.parameters and restart_at_wall)
+        return ("J_M1", "tau_cM1") if at else ()
+
+    def fit_widening(recordings, initial, options, judge=None):
+        calls.append(initial)
+        return restart
+
+    def judged(results, criterion):
+        scores = {"fit": 100.0, "restart": restart_criterion}
+        return [SimpleNamespace(label=k, criterion=scores[k]) for k, _ in results]
+
+    monkeypatch.setattr(fit_module, "_at_the_wall", at_the_wall)
+    monkeypatch.setattr(fit_module, "_fit_widening", fit_widening)
+    monkeypatch.setattr(fit_module, "judged", judged)
+    monkeypatch.setattr(fit_module.Criterion, "of", classmethod(lambda cls, *a, **k: None))
+    return first, restart, calls
+
+
+def test_a_fit_against_the_stiffness_wall_restarts_its_wall_parameters_from_the_start(
+    monkeypatch, table
+):
+    """The restart begins where the fit ended with only the wall's parameters back at the
+    start's values; better and off the wall, it is the answer, saying so."""
+    from hframe_id.fitting.fit import _off_the_wall
+
+    first, restart, calls = _wall_strategy(monkeypatch, table, 40.0, restart_at_wall=False)
+    out = _off_the_wall([], table, FitOptions().for_model(table.variant), None, first)
+    (begun,) = calls
+    assert begun.values["J_M1"] == table.values["J_M1"]
+    assert begun.values["tau_cM1"] == table.values["tau_cM1"]
+    assert begun.values["k_b"] == 9000.0  # the rest from where the fit ended
+    assert out.success and out.parameters is restart.parameters
+    assert "restarted with J_M1, tau_cM1 at the start's values" in out.message
+    assert "criterion 40 against 100" in out.message
+
+
+def test_a_fit_still_against_the_stiffness_wall_fails_saying_max_substeps_decided(
+    monkeypatch, table
+):
+    """A restart that ends worse leaves the first fit, which is still against the wall: a
+    failure naming the parameters and ``max_substeps``. A prediction-error fit is not
+    restarted (no simulation criterion to judge by) and fails the same way; so does a
+    better restart that ends against the wall too."""
+    from hframe_id.fitting.fit import _off_the_wall
+
+    first, _, calls = _wall_strategy(monkeypatch, table, 400.0, restart_at_wall=False)
+    out = _off_the_wall([], table, FitOptions().for_model(table.variant), None, first)
+    assert len(calls) == 1 and out.parameters is first.parameters
+    assert not out.success
+    assert out.message.startswith("max_substeps decided the answer: J_M1, tau_cM1 ended")
+    assert "max_substeps 500" in out.message
+    calls.clear()
+    out = _off_the_wall(
+        [], table, FitOptions(continuity="none").for_model(table.variant), None, first
+    )
+    assert calls == [] and not out.success
+    first, restart, _ = _wall_strategy(monkeypatch, table, 40.0, restart_at_wall=True)
+    out = _off_the_wall([], table, FitOptions().for_model(table.variant), None, first)
+    assert out.parameters is restart.parameters and not out.success
+
+
+def test_a_fit_off_the_stiffness_wall_is_left_as_it_is(monkeypatch, table):
+    from hframe_id.fitting.fit import _off_the_wall
+
+    first, _, calls = _wall_strategy(monkeypatch, table, 40.0, restart_at_wall=False)
+    calm = _Ended(table, table)
+    assert _off_the_wall([], table, FitOptions().for_model(table.variant), None, calm) is calm
+    assert calls == []
