@@ -255,9 +255,10 @@ def _off_the_wall(
     (``wall_parameters``) back at ``start``'s values, the better of the two by the first's
     criterion. Still against the wall, a failure saying so: ``max_substeps``, not the data,
     decided those parameters. (The heavy dev plant's fit walked both motor inertias down to
-    the wall, 1.8e-6 kg m^2, held-out motor-angle rms 4.4 x the reduction's; restarted with
-    them at the start's 1.1e-4 it ended at 0.66 x: docs/studies/.) A prediction-error fit
-    (continuity "none") has no simulation criterion to judge a restart by: it only says so."""
+    the wall, 1.8e-6 kg m^2, held-out motor-angle rms 4.4 x the reduction's; restarted, it
+    ends at 0.54 x: docs/studies/2026-11-27-the-stiffness-wall-as-a-constraint.md.) A
+    prediction-error fit (continuity "none") has no simulation criterion to judge a restart
+    by: it only says so."""
     names = _at_the_wall(result, recordings)
     if names and options.continuity == "exact":
         moved = {n: float(start.values[n]) for n in names}
