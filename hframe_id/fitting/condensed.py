@@ -16,6 +16,7 @@ import numpy as np
 from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
 from hframe_id.fitting.statistics import Block
+from hframe_id.fitting.substep_plan import coordinate_smoothing
 
 #: Floor of the Marquardt scaling, relative to the largest diagonal entry of the block.
 DIAG_FLOOR = 1e-9
@@ -50,9 +51,7 @@ class CondensedModel:
         Coulomb law turns within a few v_s), and the speed at rest is nearly collinear with
         the position, so without it Gauss-Newton takes long, useless velocity steps.
         ``weight``: noise-sized residuals per smoothing velocity of step (0: none)."""
-        vs = np.array(
-            [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.ms.model.coordinates]
-        )
+        vs = coordinate_smoothing(self.ms.model, smoothing)
         self.prox_unit = np.concatenate([np.zeros(self.ms.nq), weight / vs**2])
         self.prox_scale = 1.0
 

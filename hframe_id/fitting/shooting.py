@@ -40,7 +40,11 @@ from hframe_id.fitting.link_options import TranscriptionOptions
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, output_matrix, rest_projector
 from hframe_id.fitting.shooting_nodes import ShootingNodes
-from hframe_id.fitting.substep_plan import plan_substeps
+from hframe_id.fitting.substep_plan import (
+    coordinate_smoothing,
+    plan_substeps,
+    rest_and_moving_jacobians,
+)
 
 #: Window groups are padded to a multiple of this, so mapped functions are reused.
 PAD = 16
@@ -179,14 +183,6 @@ class MultipleShooting(ShootingNodes):
             False: compiled_windows(self.model, None),
         }
         self.defect_scale = self._defect_scale()
-        x = ca.SX.sym("x", self.nx)
-        p = ca.SX.sym("p", len(self.model.parameters))
-        s = ca.SX.sym("s", 2)
-        self._jac_x = ca.Function(
-            "dynamics_jac_x",
-            [x, p, s],
-            [ca.jacobian(self.model.dynamics(x, ca.DM.zeros(self.nu), p, s), x)],
-        )
 
     def _defect_scale(self) -> np.ndarray:
         """(n_x,) state scale for continuity defects: a coordinate's, the noise of the channel
@@ -272,9 +268,7 @@ class MultipleShooting(ShootingNodes):
         velocities (from a velocity estimate (W, M + 1, n_q)), widened by ``margin``
         windows on each side within the experiment: the part of a record that carries
         dynamics (at rest, the dynamics are stiff and cost most to integrate)."""
-        vs = np.array(
-            [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.model.coordinates]
-        )
+        vs = coordinate_smoothing(self.model, smoothing)
         moving = np.any(np.abs(velocity) > 20 * vs, axis=(1, 2))
         widened = moving.copy()
         for shift in range(1, margin + 1):
@@ -295,12 +289,8 @@ class MultipleShooting(ShootingNodes):
         """Fast and stiff substep counts, per velocity state the speed below which a window
         needs the stiff count, and whether the point is refused (stability at rest needs
         more than ``max_substeps``: ``evaluate`` integrates nothing there)."""
-        jac = lambda x: np.array(self._jac_x(x, p, ca.DM(smoothing)))  # noqa: E731
-        vs = np.array(
-            [smoothing[0] if c.unit == "m" else smoothing[1] for c in self.model.coordinates]
-        )
-        moving = np.concatenate([np.zeros(self.nq), 100.0 * vs])
-        return plan_substeps(jac(np.zeros(self.nx)), jac(moving), vs, self.dt, self.transcription)
+        a_rest, a_moving, vs = rest_and_moving_jacobians(self.model, p, smoothing)
+        return plan_substeps(a_rest, a_moving, vs, self.dt, self.transcription)
 
     def _needs_stiff(self, velocity: np.ndarray, threshold: np.ndarray) -> np.ndarray:
         """(W,) windows whose velocities (W, K, n_q) come near zero or change sign."""

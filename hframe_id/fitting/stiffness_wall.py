@@ -32,11 +32,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
-import casadi as ca
 import numpy as np
 
+from hframe_id.fitting.substep_plan import coulomb_rates, rest_and_moving_jacobians
 from hframe_id.fitting.trust_region import trust_region_step
 from hframe_id.models import Model
 from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT, spectral_radius_at_rest
@@ -109,28 +108,10 @@ def step_on_wall(
     return d0 + z_basis @ z, whole
 
 
-@lru_cache(maxsize=32)
-def _state_jacobian(model: Model) -> ca.Function:
-    """A(x, p, s) = df/dx at inputs 0 (built once per model)."""
-    x = ca.SX.sym("x", model.n_states)
-    p = ca.SX.sym("p", len(model.parameters))
-    s = ca.SX.sym("s", 2)
-    f = model.dynamics(x, ca.DM.zeros(model.n_inputs), p, s)
-    return ca.Function("state_jacobian", [x, p, s], [ca.jacobian(f, x)])
-
-
-def coulomb_rates(model: Model, p: np.ndarray, smoothing) -> np.ndarray:
-    """(n_q,) each velocity's Coulomb rate at rest [1/s]: its own rate df_v/dv at rest less
-    that at 100 smoothing velocities, where the smoothed Coulomb slope has decayed
-    (``substep_plan.plan_substeps`` reads the same difference)."""
-    jac = _state_jacobian(model)
-    nq = model.n_states // 2
-    vs = np.array([smoothing[0] if c.unit == "m" else smoothing[1] for c in model.coordinates])
-    moving = np.concatenate([np.zeros(nq), 100.0 * vs])
-    s = ca.DM(smoothing)
-    rest = np.diag(np.array(jac(np.zeros(model.n_states), p, s)))[nq:]
-    fast = np.diag(np.array(jac(moving, p, s)))[nq:]
-    return np.abs(rest - fast)
+def _coulomb_rates(model: Model, p: np.ndarray, smoothing) -> np.ndarray:
+    """(n_q,) ``substep_plan.coulomb_rates`` at all parameters ``p`` (SI, model order)."""
+    a_rest, a_moving, _ = rest_and_moving_jacobians(model, p, smoothing)
+    return coulomb_rates(a_rest, a_moving)
 
 
 def wall_parameters(
@@ -143,7 +124,7 @@ def wall_parameters(
     that stiff. A parameter sets a rate when the rate's elasticity to it exceeds
     ``DEPENDENCE``."""
     limit = transcription.max_substeps * RK4_STABILITY_LIMIT / (dt * transcription.substep_safety)
-    rates = coulomb_rates(model, p, smoothing)
+    rates = _coulomb_rates(model, p, smoothing)
     capped = rates > limit
     if not capped.any():
         return ()
@@ -155,7 +136,7 @@ def wall_parameters(
             continue
         moved = p.copy()
         moved[i] *= 1.0 + DIFFERENCE_STEP
-        ratio = coulomb_rates(model, moved, smoothing)[capped] / rates[capped]
+        ratio = _coulomb_rates(model, moved, smoothing)[capped] / rates[capped]
         if np.any(np.abs(np.log(ratio)) > DEPENDENCE * DIFFERENCE_STEP):
             out.append(name)
     return tuple(out)

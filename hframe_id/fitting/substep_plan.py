@@ -13,15 +13,54 @@ unstable (docs/studies/2026-11-27-fleet-fit-crawl-and-fleet-check.md).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
+import casadi as ca
 import numpy as np
 
 from hframe_id.fitting.link_options import TranscriptionOptions
+from hframe_id.models import Model
 from hframe_id.simulation.integrators import (
     MIN_SUBSTEPS,
     RK4_STABILITY_LIMIT,
     substeps_for_radius,
 )
+
+
+def coordinate_smoothing(model: Model, smoothing) -> np.ndarray:
+    """(n_q,) each coordinate's smoothing velocity: ``smoothing`` = (linear [m/s], angular
+    [rad/s])."""
+    return np.array([smoothing[0] if c.unit == "m" else smoothing[1] for c in model.coordinates])
+
+
+@lru_cache(maxsize=32)
+def _state_jacobian(model: Model) -> ca.Function:
+    """A(x, p, s) = df/dx at inputs 0 (built once per model)."""
+    x = ca.SX.sym("x", model.n_states)
+    p = ca.SX.sym("p", len(model.parameters))
+    s = ca.SX.sym("s", 2)
+    f = model.dynamics(x, ca.DM.zeros(model.n_inputs), p, s)
+    return ca.Function("state_jacobian", [x, p, s], [ca.jacobian(f, x)])
+
+
+def rest_and_moving_jacobians(model: Model, p: np.ndarray, smoothing):
+    """(df/dx at rest, df/dx at 100 smoothing velocities, each coordinate's smoothing
+    velocity) at all parameters ``p`` (SI, model order): what ``plan_substeps`` and
+    ``coulomb_rates`` read."""
+    jac = _state_jacobian(model)
+    vs = coordinate_smoothing(model, smoothing)
+    moving = np.concatenate([np.zeros(len(vs)), 100.0 * vs])
+    s = ca.DM(smoothing)
+    at = lambda x: np.array(jac(x, p, s))  # noqa: E731
+    return at(np.zeros(model.n_states)), at(moving), vs
+
+
+def coulomb_rates(a_rest: np.ndarray, a_moving: np.ndarray) -> np.ndarray:
+    """(n_q,) each velocity's Coulomb rate at rest [1/s] from the Jacobians at rest and in
+    motion (``rest_and_moving_jacobians``): its own rate at rest less that in motion, where
+    the smoothed Coulomb slope has decayed by sech^2(100) to nothing."""
+    nq = a_rest.shape[0] // 2
+    return np.abs(np.diag(a_rest)[nq:] - np.diag(a_moving)[nq:])
 
 
 def plan_substeps(
@@ -47,7 +86,7 @@ def plan_substeps(
     fast = substeps_for_radius(radius_moving, dt, safety, MIN_SUBSTEPS, cap)
     stiff = substeps_for_radius(radius_rest, dt, safety, fast, cap)
     # Coulomb part of each velocity's own rate: lambda_j sech^2(v / v_s).
-    lam = np.abs(np.diag(a_rest)[nq:] - np.diag(a_moving)[nq:])
+    lam = coulomb_rates(a_rest, a_moving)
     limit = RK4_STABILITY_LIMIT / safety
     threshold = np.zeros(nq)
     for j in range(nq):

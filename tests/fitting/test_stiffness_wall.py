@@ -13,10 +13,10 @@ from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState
 from hframe_id.fitting.stiffness_wall import (
     StiffnessWall,
-    coulomb_rates,
     step_on_wall,
     wall_parameters,
 )
+from hframe_id.fitting.substep_plan import coulomb_rates, rest_and_moving_jacobians
 from hframe_id.models import build_model
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.simulation.integrators import (
@@ -93,7 +93,7 @@ def test_a_motors_coulomb_rate_at_rest_is_its_friction_over_smoothing_and_inerti
     v_s)): its own rate at rest less that in motion is tau_c / (v_s J), to rounding."""
     model, p, names = hframe
     vs = model.options.smoothing
-    rates = coulomb_rates(model, p, vs)
+    rates = coulomb_rates(*rest_and_moving_jacobians(model, p, vs)[:2])
     motors = [i for i, c in enumerate(model.coordinates) if c.unit == "rad"]
     assert len(motors) == 2
     for k, i in enumerate(motors, start=1):
