@@ -20,9 +20,9 @@ from hframe_id.fitting.condensed import CondensedModel
 from hframe_id.fitting.gauss_newton_settings import GaussNewtonSettings
 from hframe_id.fitting.options import FitProgress
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
-from hframe_id.fitting.stiffness_wall import StiffnessWall, step_on_wall
+from hframe_id.fitting.stiffness_wall import StiffnessWall
 from hframe_id.fitting.substep_plan import stopped_message
-from hframe_id.fitting.trust_region import trust_region_step
+from hframe_id.fitting.trust_region import bounded_step
 
 #: A free log-parameter this close to a bound is on it (rounding of the projection).
 AT_BOUND = 1e-9
@@ -307,11 +307,8 @@ class GaussNewton(CondensedModel):
             if out.overflowed:
                 break
             d, out.full_step = self._bounded_step(
-                h_red, g_red, state.theta[index], lo[index], hi[index], walk.radius
+                h_red, g_red, state.theta[index], lo[index], hi[index], walk.radius, wall
             )
-            if wall is not None and wall.crossed_by(d):
-                d, out.full_step = step_on_wall(h_red, g_red, wall, walk.radius)
-                d = np.clip(state.theta[index] + d, lo[index], hi[index]) - state.theta[index]
             dnodes, change = complete(d)
             dtheta = np.zeros_like(state.theta)
             dtheta[index] = d
@@ -396,30 +393,25 @@ class GaussNewton(CondensedModel):
         )
         return float(np.max(np.abs(d), initial=0.0)) if full_step else math.inf
 
-    def _bounded_step(self, h_red, g_red, theta_f, lower, upper, radius: float):
-        """(step in the free log-parameters, whether the trust region left it whole).
+    def _bounded_step(
+        self, h_red, g_red, theta_f, lower, upper, radius: float, wall: StiffnessWall | None = None
+    ):
+        """(step in the free log-parameters, whether the trust region left it whole):
+        ``trust_region.bounded_step`` within the bounds and the stiffness wall (where a
+        trial was refused for stiffness), parameters at a bound whose step points outward
+        held.
 
         Parameters the data do not determine at all (textbook relative std above
         ``settings.sloppy_std``) are not moved: along such directions Gauss-Newton steps are
         arbitrary and can take the model somewhere stiff and ill-conditioned. The
-        identifiability step later holds them at their initial value. Parameters at a bound
-        whose step points outward are held, the rest clipped into the bounds."""
-        sub = (
+        identifiability step later holds them at their initial value."""
+        movable = (
             _determined(h_red, self.settings.sloppy_std)
             if self.freeze_sloppy
             else np.ones(len(theta_f), dtype=bool)
         )
-        for _ in range(len(theta_f) + 1):
-            d_sub, full_step = trust_region_step(h_red[np.ix_(sub, sub)], g_red[sub], radius)
-            d = np.zeros(len(theta_f))
-            d[sub] = d_sub
-            out = sub & (
-                ((theta_f <= lower + 1e-12) & (d < 0)) | ((theta_f >= upper - 1e-12) & (d > 0))
-            )
-            if not out.any():
-                break
-            sub &= ~out
-        return np.clip(theta_f + d, lower, upper) - theta_f, full_step
+        half_space = None if wall is None else (wall.normal, wall.margin)
+        return bounded_step(h_red, g_red, theta_f, lower, upper, radius, movable, half_space)
 
     def _adapt_region(self, walk: _Walk, ratio: float, new: float, length: float, n_free: int):
         """The trust region and the node damping after a step of ``length`` whose merit

@@ -18,7 +18,9 @@ rest, rho (the quantity that sets the substeps, ``substeps_for_radius``):
 rounding)
 and the step is the Gauss-Newton step within the trust region on that half-space: where the
 unconstrained step crosses it, the minimiser on the hyperplane n . d = log rho_wall -
-log rho(theta) (one linear equality eliminated, ``step_on_wall``). The iterate then slides
+log rho(theta) (one linear equality eliminated, ``trust_region.step_on_hyperplane``),
+on the parameters the step moves (``trust_region.bounded_step``: a parameter held at a
+bound or frozen as sloppy does not push the step off the wall). The iterate then slides
 along the wall while the data pull it there, and leaves it when they pull it back.
 
 A fit that ends there has had its answer decided by ``max_substeps``, as a fit ending on a
@@ -36,7 +38,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from hframe_id.fitting.substep_plan import coulomb_rates, rest_and_moving_jacobians
-from hframe_id.fitting.trust_region import trust_region_step
 from hframe_id.models import Model
 from hframe_id.simulation.integrators import RK4_STABILITY_LIMIT, spectral_radius_at_rest
 
@@ -79,33 +80,6 @@ class StiffnessWall:
         # the wall itself is refused or not by the rounding of its last digits.
         cap = ms.transcription.max_substeps - 0.5
         return cls(normal=normal, margin=math.log(cap * RK4_STABILITY_LIMIT / ms.dt) - here)
-
-    def crossed_by(self, d: np.ndarray) -> bool:
-        """Whether the step ``d`` crosses the linearised wall."""
-        return float(self.normal @ d) > self.margin
-
-
-def step_on_wall(
-    h: np.ndarray, g: np.ndarray, wall: StiffnessWall, radius: float
-) -> tuple[np.ndarray, bool]:
-    """argmin g.d + d.H.d / 2 subject to n . d = margin and |d|_2 <= radius: (step, whether
-    the trust region left it whole). d = d0 + Z z with d0 the shortest step onto the
-    hyperplane and Z an orthonormal basis of its directions; the solver's own subproblem
-    (``trust_region_step``) in z, within what the region leaves beyond d0. A
-    hyperplane farther than ``radius``: the step towards it, cut at the region."""
-    n = wall.normal
-    nn = float(n @ n)
-    if nn == 0.0:  # the free parameters do not move the stiffness: nothing to respect
-        return trust_region_step(h, g, radius)
-    d0 = n * (wall.margin / nn)
-    left = radius**2 - float(d0 @ d0)
-    if left <= 0.0:
-        return d0 * (radius / math.sqrt(float(d0 @ d0))), False
-    # Q of [n, I]: its first column is n's direction, the others span the hyperplane.
-    q, _ = np.linalg.qr(np.column_stack([n, np.eye(len(n))]))
-    z_basis = q[:, 1 : len(n)]
-    z, whole = trust_region_step(z_basis.T @ h @ z_basis, z_basis.T @ (h @ d0 + g), math.sqrt(left))
-    return d0 + z_basis @ z, whole
 
 
 def _coulomb_rates(model: Model, p: np.ndarray, smoothing) -> np.ndarray:

@@ -11,11 +11,7 @@ from hframe_id.fitting.link_options import TranscriptionOptions
 from hframe_id.fitting.problem import build_problem, default_free
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState
-from hframe_id.fitting.stiffness_wall import (
-    StiffnessWall,
-    step_on_wall,
-    wall_parameters,
-)
+from hframe_id.fitting.stiffness_wall import StiffnessWall, wall_parameters
 from hframe_id.fitting.substep_plan import coulomb_rates, rest_and_moving_jacobians
 from hframe_id.models import build_model
 from hframe_id.recordings.simulated import simulate_recording
@@ -25,60 +21,6 @@ from hframe_id.simulation.integrators import (
     stability_substeps,
 )
 from hframe_id.simulation.open_loop import simulate
-
-
-def test_the_step_on_the_wall_is_the_minimiser_on_its_hyperplane():
-    """min |d - (1, 0)|^2 / 2 on d1 + d2 = 0: d = (1/2, -1/2) (the projection of the
-    unconstrained minimiser onto the hyperplane), inside a region it does not reach."""
-    h = np.eye(2)
-    g = np.array([-1.0, 0.0])
-    d, whole = step_on_wall(h, g, StiffnessWall(np.array([1.0, 1.0]), 0.0), radius=10.0)
-    np.testing.assert_allclose(d, [0.5, -0.5], atol=1e-12)
-    assert whole
-
-
-def test_the_step_on_the_wall_meets_the_margin_and_the_region():
-    """A curved model, a wall at margin 0.3 along n = (2, -1, 0): the step ends on it
-    (n . d = 0.3), is no longer than the region, and no point of the hyperplane within the
-    region has a lower model value (checked on 2,000 seeded draws)."""
-    rng = np.random.default_rng(0)
-    a = rng.normal(size=(3, 3))
-    h = a @ a.T + 0.1 * np.eye(3)
-    g = np.array([-3.0, 2.0, 1.0])
-    wall = StiffnessWall(np.array([2.0, -1.0, 0.0]), 0.3)
-    radius = 0.8
-    d, _ = step_on_wall(h, g, wall, radius)
-    assert wall.normal @ d == pytest.approx(0.3, abs=1e-12)
-    assert np.linalg.norm(d) <= radius * (1 + 1e-9)
-
-    def model(x):
-        return g @ x + 0.5 * x @ h @ x
-
-    n = wall.normal / np.linalg.norm(wall.normal)
-    d0 = n * 0.3 / np.linalg.norm(wall.normal)
-    basis = np.linalg.svd(n[None, :])[2][1:]
-    # Draws on the hyperplane inside the region; the bisection that sizes the region's
-    # step stops at 1e-6 relative, so the step may be beaten by that much, no more.
-    z = rng.normal(size=(2000, 2)) * 0.5
-    points = d0 + z @ basis
-    inside = points[np.linalg.norm(points, axis=1) <= radius]
-    assert len(inside) > 100
-    assert model(d) <= min(model(x) for x in inside) + 1e-6 * abs(model(d))
-
-
-def test_a_wall_beyond_the_region_gives_the_step_towards_it():
-    """The hyperplane farther than the region: the step goes straight to it, cut at the
-    region's edge."""
-    wall = StiffnessWall(np.array([0.0, 3.0]), 6.0)  # the hyperplane d2 = 2
-    d, whole = step_on_wall(np.eye(2), np.array([1.0, 1.0]), wall, radius=0.5)
-    np.testing.assert_allclose(d, [0.0, 0.5])
-    assert not whole
-
-
-def test_a_step_that_stays_on_its_side_does_not_cross():
-    wall = StiffnessWall(np.array([1.0, -1.0]), 0.2)
-    assert not wall.crossed_by(np.array([0.1, -0.05]))
-    assert wall.crossed_by(np.array([0.3, 0.0]))
 
 
 @pytest.fixture(scope="module")
