@@ -24,7 +24,7 @@ import threading
 import warnings
 from collections.abc import Sequence
 
-from hframe_id.cli import model_files, progress, signals
+from hframe_id.cli import model_files, outputs, progress, signals
 from hframe_id.errors import HframeIdError, bounded_message, shown
 
 #: The subcommands in the order ``hframe-id --help`` lists them: (name, module, one line of
@@ -206,7 +206,7 @@ def _end_despite_threads(code: int) -> None:
 def _command(argv: list[str]) -> int:
     """``main``'s work: the subcommand run and every way it ends reported."""
     try:
-        with signals.handled():
+        with signals.handled(), outputs.command(argv):
             try:
                 # Ctrl-C while the command's module is imported: one line too
                 parser = build_parser(chosen_command(argv))

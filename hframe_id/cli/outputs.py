@@ -12,6 +12,11 @@ Writability is probed by creating (and at once removing) a temporary file where 
 would go: the permission bits say little when running as root or on special file systems
 such as /proc.
 
+Within one command (``command``) the guard also refuses an existing file that the command
+line names twice, once as an input (``reduce F.yaml --out F.yaml --force`` replaced the
+parameter file it read), and two outputs on one path (``control --csv p --plot p`` failed
+after the simulation), even with ``--force``.
+
 The outputs are then written through ``written_together``: each under a hidden temporary name
 beside its target, all put in place when the command's work is done, none on any failure.
 A run longer than ``MAX_SAMPLES`` is refused the same way, before its tables are allocated.
@@ -22,8 +27,9 @@ from __future__ import annotations
 import argparse
 import os
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from hframe_id.atomic import Staging
@@ -40,6 +46,77 @@ def add_force_option(parser: argparse.ArgumentParser, *aliases: str) -> None:
         action="store_true",
         help="replace output files that exist already (default: refuse, before any work)",
     )
+
+
+@dataclass
+class _Command:
+    """The command the guard checks outputs for: the words of its command line and the
+    outputs checked so far (absolute path: option, whether a folder)."""
+
+    words: tuple[str, ...]
+    claimed: dict[str, tuple[str, bool]] = field(default_factory=dict)
+
+
+_running: _Command | None = None
+
+
+@contextmanager
+def command(argv: Sequence[str]) -> Iterator[None]:
+    """The outputs checked in the block belong to one command whose command line is
+    ``argv``: an output that ``argv`` also names as an input, or that another of its outputs
+    is written on (or under), is refused (``_claim``). Outside the block neither is checked."""
+    global _running
+    _running = _Command(tuple(str(word) for word in argv))
+    try:
+        yield
+    finally:
+        _running = None
+
+
+def _named_files(words: Iterable[str]) -> Iterator[str]:
+    """The paths a command line may name: each word, and the value of each ``--option=value``."""
+    for word in words:
+        yield word
+        if word.startswith("--") and "=" in word:
+            yield word.split("=", 1)[1]
+
+
+def _refuse_input(path: Path, option: str) -> None:
+    """Raise if the existing file ``path`` is named on the command line more than once: its
+    output option names it once, so it is also one of the command's inputs."""
+    if _running is None or not path.is_file():
+        return
+    named = 0
+    for word in _named_files(_running.words):
+        try:
+            named += word != "" and os.path.samefile(word, path)
+        except OSError:  # not a path, or nothing there
+            continue
+    if named > 1:
+        raise OptionError(
+            f"{option} {path}: is also an input of this command; write the output elsewhere"
+        )
+
+
+def _claim(path: Path, option: str, folder: bool) -> None:
+    """Record ``path`` as an output of ``option``; raise if an output of another option is
+    the same file, or a file that one of them would be written under."""
+    if _running is None:
+        return
+    key = os.path.abspath(path)
+    for other, (other_option, other_folder) in _running.claimed.items():
+        if other_option == option:
+            continue
+        same = other == key and not (folder and other_folder)
+        under_file = (key.startswith(other + os.sep) and not other_folder) or (
+            other.startswith(key + os.sep) and not folder
+        )
+        if same or under_file:
+            raise OptionError(
+                f"{option} {path}: {other_option} {shown(other)} is written there too; give "
+                "each output its own path"
+            )
+    _running.claimed.setdefault(key, (option, folder))
 
 
 def _probe(directory: Path, option: str, target: Path) -> None:
@@ -92,6 +169,7 @@ def _check_target(
     after the command's work. Root may write anything, and ``os.access`` says so. A folder
     written into (``replaced`` False) is checked by ``_probe``."""
     _reachable(path, option, path)
+    _claim(path, option, folder)
     if folder and path.exists() and not path.is_dir():
         raise OptionError(f"{option} {path}: exists and is not a directory")
     if not folder and path.is_dir():
@@ -102,6 +180,7 @@ def _check_target(
         )
     if (path.exists() or path.is_symlink()) and not force:
         raise OptionError(f"{option} {path}: exists already; pass --force to replace it")
+    _refuse_input(path, option)
     if replaced and (path.is_file() or path.is_dir()) and not os.access(path, os.W_OK):
         raise OptionError(
             f"{option} {path}: exists and is read-only; make it writable or remove it first"

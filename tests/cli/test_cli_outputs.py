@@ -276,3 +276,43 @@ def test_import_on_a_full_disk_names_its_output(work, capsys, monkeypatch, fault
     line = refused([*argv, "--variant", "a", "--out", "run.mcap"], capsys, "No space left")
     assert named in line
     assert sorted(_listing(work)) == ["afile", "log.csv"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "name"),
+    [
+        (["reduce", "in.yaml", "--out", "in.yaml", "--force"], "in.yaml"),
+        (["export", "in.yaml", "--format", "json", "--out=in.yaml", "--force"], "in.yaml"),
+        (["simulate", "--params", "in.yaml", *STEP, "--out", "link.csv", "--force"], "link.csv"),
+        (["import", "in.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m",
+          "--variant", "a", "--out", "in.csv", "--force"], "in.csv"),
+    ],
+    ids=["reduce", "export", "simulate-through-a-link", "import"],
+)  # fmt: skip
+def test_an_input_is_never_replaced_by_an_output(work, capsys, argv, name):
+    """``reduce F --out F --force`` replaced the parameter file it read (so did export,
+    simulate and import): an output the command line also names as an input is refused,
+    even with ``--force`` and through a symbolic link."""
+    source = ROOT / "models" / ("hframe-20-table3.1.yaml" if argv[0] == "reduce" else H8.name)
+    (work / "in.yaml").write_bytes(source.read_bytes())
+    (work / "in.csv").write_text("t,u,x\n0,1,0\n0.001,1,0\n")
+    (work / "link.csv").symlink_to("in.yaml")
+    before = _listing(work)
+    refused(argv, capsys, name, "is also an input of this command")
+    assert _listing(work) == before
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["control", "--params", H8, "--kp", "150", "--csv", "p", "--plot", "p"], "--plot p"),
+        (["simulate", "--params", H8, *STEP, "--out", "s.csv", "--plot", "s.csv"], "--plot"),
+    ],
+    ids=["control", "simulate"],
+)
+def test_two_outputs_on_one_path_are_refused_before_any_work(work, capsys, argv, named):
+    """``control --csv p --plot p`` ran the closed loop, then failed writing p/fig5_9_path.png
+    under the file p: two outputs of one command on one path are refused at once."""
+    before = _listing(work)
+    refused(argv, capsys, named, "is written there too")
+    assert _listing(work) == before
