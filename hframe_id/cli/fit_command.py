@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from hframe_id.cli.fit_arguments import HelpFormatter, add_fit_arguments
 from hframe_id.cli.fit_options import fit_options
 from hframe_id.cli.outputs import check_dir, check_input
-from hframe_id.errors import FitError, OptionError
+from hframe_id.errors import FitError, ModelError, OptionError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.options import FitOptions
 from hframe_id.resources import datasets_dir
@@ -68,6 +68,19 @@ def resolve_dataset(name: str) -> Path:
             return check_input(candidate)
     looked = ", ".join(f"{d}/" for d in DATASETS_DIRS)
     raise FitError(f"{name}: no such recording (also looked in {looked})")
+
+
+def _recorded_variant(path: Path, recording: Recording) -> str:
+    """The model variant ``recording`` (read from ``path``) names in ``rig.variant``, which
+    must be one this hframe-id knows or a model file declared: the model a fit without
+    ``--model`` fits."""
+    from hframe_id.models import declaration
+
+    try:
+        declaration(recording.variant)
+    except ModelError as err:
+        raise ModelError(f"{path}: rig.variant: {err}") from None
+    return recording.variant
 
 
 def _initial(args: argparse.Namespace, variant: str) -> tuple[ParameterSet, Path]:
@@ -214,7 +227,7 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
             recordings.append(read_recording(path))
     for warning in caught:
         print(f"hframe-id: warning: {warning.message}", file=sys.stderr)
-    variant = model or recordings[0].variant
+    variant = model or _recorded_variant(paths[0], recordings[0])
     if not model:
         initial, initial_path = _initial(args, variant)
     options = options.for_model(variant)

@@ -188,16 +188,22 @@ RIG_REQUIRED = (
 )
 #: The numeric ``rig`` keys and the range of each, checked when a recording is read (a
 #: recording whose encoder has 0 counts per revolution used to fail deep in the fitter):
-#: (lowest value, whether the lowest value itself is allowed); every one finite.
-RIG_NUMBERS: dict[str, tuple[float, bool]] = {
-    "sample_period_s": (0.0, False),
-    "encoder_counts_per_rev": (1.0, True),
-    "dac_bits": (1.0, True),
-    "laser_noise_std_m": (0.0, True),
-    "pulley_radius_m": (0.0, False),
+#: (lowest value, whether the lowest value itself is allowed, highest value allowed); every
+#: one finite (a DAC of 100000 bits was refused by the fitter without naming the file).
+RIG_NUMBERS: dict[str, tuple[float, bool, float]] = {
+    "sample_period_s": (0.0, False, math.inf),
+    "encoder_counts_per_rev": (1.0, True, math.inf),
+    "dac_bits": (1.0, True, 32.0),
+    "laser_noise_std_m": (0.0, True, math.inf),
+    "pulley_radius_m": (0.0, False, math.inf),
 }
 #: ``rig`` keys that hold a range as (low key, high key): low < high.
-RIG_RANGES = (("dac_min_v", "dac_max_v"), ("laser_min_m", "laser_max_m"))
+RIG_RANGES = (
+    ("dac_min_v", "dac_max_v"),
+    ("laser_min_m", "laser_max_m"),
+    ("limit_x_min_m", "limit_x_max_m"),
+    ("limit_y_min_m", "limit_y_max_m"),
+)
 #: Keys every ``rig`` metadata record of a ``SignalSample`` recording has.
 SIGNAL_RIG_REQUIRED = (
     "variant",

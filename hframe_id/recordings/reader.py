@@ -347,15 +347,19 @@ def _rig_metadata(
 def _check_rig_numbers(where: str, rig: dict[str, Any]) -> None:
     """The numeric ``rig`` keys present are finite numbers in their ranges
     (``fmt.RIG_NUMBERS``, ``fmt.RIG_RANGES``)."""
-    for key, (lowest, allowed) in fmt.RIG_NUMBERS.items():
+    for key, (lowest, allowed, highest) in fmt.RIG_NUMBERS.items():
         if key not in rig:
             continue
         value = rig[key]
         number = isinstance(value, int | float) and not isinstance(value, bool)
         if not (
-            number and math.isfinite(value) and (value >= lowest if allowed else value > lowest)
+            number
+            and math.isfinite(value)
+            and (value >= lowest if allowed else value > lowest)
+            and value <= highest
         ):
             bound = f"{'>=' if allowed else '>'} {lowest:g}"
+            bound += f" and <= {highest:g}" if math.isfinite(highest) else ""
             raise LogFormatError(f"{where}: rig.{key} must be a number {bound}, got {shown(value)}")
     for low, high in fmt.RIG_RANGES:
         if low in rig and high in rig and not _numbers_ordered(rig[low], rig[high]):

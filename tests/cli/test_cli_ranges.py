@@ -193,3 +193,28 @@ def test_fit_empty_free_list(work, capsys):
     """--free '' fitted the default free set as if no --free were given."""
     refused(["fit", REC, "--out-dir", "fits", "--free", ""], capsys, "free")
     assert list(work.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("rig", "named"),
+    [
+        ({"dac_bits": "100000"}, "rig.dac_bits must be a number >= 1 and <= 32, got 100000"),
+        ({"limit_x_min_m": "1", "limit_x_max_m": "-1"}, "rig.limit_x_min_m 1 must be a number"),
+    ],
+    ids=["dac-bits", "limits"],
+)
+def test_rig_metadata_out_of_range_names_the_file(work, capsys, rig, named):
+    """A DAC of 100000 bits was refused by fit and validate without naming the file (and
+    accepted by inspect and simulate); inverted limit switches were accepted everywhere."""
+    rec = _recording(work / "rig.mcap", lambda i, m: m, rig=rig)
+    for argv in (["inspect", rec], ["fit", rec, "--quiet", "--out-dir", "fits"]):
+        refused(argv, capsys, "rig.mcap", named)
+    assert sorted(p.name for p in work.iterdir()) == ["rig.mcap"]
+
+
+def test_fit_unknown_recorded_variant_names_the_file(work, capsys):
+    """A recording naming a variant that does not exist: 'unknown model variant' without
+    saying which file named it."""
+    rec = _recording(work / "odd.mcap", lambda i, m: m, rig={"variant": "hframe-99"})
+    refused(["fit", rec, "--out-dir", "fits"], capsys, "odd.mcap", "rig.variant", "'hframe-99'")
+    assert sorted(p.name for p in work.iterdir()) == ["odd.mcap"]
