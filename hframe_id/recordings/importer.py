@@ -26,7 +26,7 @@ from hframe_id import __version__
 from hframe_id.errors import LogFormatError, OptionError, renamed
 from hframe_id.recordings import log_format as fmt
 from hframe_id.recordings.channels import VALID_SUFFIX, Channels
-from hframe_id.recordings.import_spec import RIG_KEYS, ImportSpec
+from hframe_id.recordings.import_spec import RIG_KEYS, ColumnMap, ImportSpec
 from hframe_id.recordings.reader import clock_mismatch, read_recording
 from hframe_id.recordings.sources import SourceDataError, SourceTable, read_source
 from hframe_id.recordings.units import COUNTS
@@ -124,6 +124,23 @@ def _runs(table: SourceTable, missing: np.ndarray) -> str:
     return f"{first}{more} ({int(missing.sum())} sample(s) in all)"
 
 
+#: The largest time the log's device clock holds: int64 microseconds (about 292,000 years).
+MAX_CLOCK_S = (2**63 - 1) / 1e6
+
+
+def _check_clock_range(table: SourceTable, column: ColumnMap, time_s: np.ndarray) -> None:
+    """Every time [s] of the time ``column`` fits the device clock (``MAX_CLOCK_S``): a larger
+    one overflowed the cast to microseconds, with numpy's warning."""
+    beyond = np.flatnonzero(np.abs(time_s) > MAX_CLOCK_S)
+    if beyond.size:
+        i = int(beyond[0])
+        raise SourceDataError(
+            f"{table.path}: time column {column.source!r}: {table.at(i)} is "
+            f"{table.column(column.source)[i]:.9g} {column.unit}, beyond the log's clock "
+            f"(int64 microseconds, {MAX_CLOCK_S:.3g} s)"
+        )
+
+
 def _clock(
     table: SourceTable, spec: ImportSpec, time_s: np.ndarray | None, n: int
 ) -> tuple[np.ndarray, float]:
@@ -132,6 +149,7 @@ def _clock(
         period = float(spec.sample_period_s)
         return np.round(np.arange(n) * period * 1e6).astype(np.int64), period
     column = next(c for c in spec.columns if c.role == "time")
+    _check_clock_range(table, column, time_s)
     device_time_us = np.round(time_s * 1e6).astype(np.int64)
     steps = np.diff(device_time_us)
     if (steps <= 0).any():

@@ -326,3 +326,20 @@ def test_a_mat_file_cut_in_its_header(work, capsys):
     argv = ["import", path, "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
     refused([*argv, "--variant", "a", "--out", "cut.mcap"], capsys, path, "not a readable")
     assert _listing(work) == {"cut.mat"}
+
+
+@pytest.mark.parametrize(
+    ("make", "problem"),
+    [
+        (lambda p: p.mkdir(), "is a directory, not a file"),
+        (lambda p: p.symlink_to("/dev/null"), "is a device, pipe or socket, not a file"),
+        (lambda p: None, "no such file"),
+    ],
+    ids=["folder", "device", "missing"],
+)
+def test_import_source_that_is_not_a_file(work, capsys, make, problem):
+    """import said 'no such file' of a folder and of a device."""
+    make(work / "log.csv")
+    argv = ["import", "log.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
+    refused([*argv, "--variant", "a", "--out", "i.mcap"], capsys, "log.csv", problem)
+    assert not (work / "i.mcap").exists()

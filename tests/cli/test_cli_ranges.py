@@ -218,3 +218,13 @@ def test_fit_unknown_recorded_variant_names_the_file(work, capsys):
     rec = _recording(work / "odd.mcap", lambda i, m: m, rig={"variant": "hframe-99"})
     refused(["fit", rec, "--out-dir", "fits"], capsys, "odd.mcap", "rig.variant", "'hframe-99'")
     assert sorted(p.name for p in work.iterdir()) == ["odd.mcap"]
+
+
+def test_import_time_beyond_the_device_clock(work, capsys):
+    """A time of 1e300 s overflowed the cast to microseconds (numpy's warning line), then
+    was reported as time not increasing."""
+    (work / "t.csv").write_text("t,u,x\n0,1,0\n1e300,1,0\n")
+    argv = ["import", "t.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
+    refused([*argv, "--variant", "a", "--out", "i.mcap"], capsys, "t.csv", "1e+300 s",
+            "beyond the log's clock")  # fmt: skip
+    assert sorted(p.name for p in work.iterdir()) == ["t.csv"]
