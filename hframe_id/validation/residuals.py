@@ -55,8 +55,9 @@ class CorrelationTest:
 
 
 def band_99(n_samples: int) -> float:
-    """Half-width of the 99 % band for N samples under whiteness/independence: 2.58 / sqrt(N)."""
-    return Z_99 / np.sqrt(n_samples)
+    """Half-width of the 99 % band for N samples under whiteness/independence: 2.58 / sqrt(N)
+    (infinite without samples: a channel with no valid sample has no test)."""
+    return Z_99 / math.sqrt(n_samples) if n_samples > 0 else math.inf
 
 
 def allowed_outside(n_lags: int) -> int:
@@ -75,7 +76,9 @@ def allowed_outside(n_lags: int) -> int:
 
 
 def _centred(signal: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    return np.where(valid, signal - signal[valid].mean(), 0.0)
+    """``signal`` less its mean over the ``valid`` samples, 0 elsewhere (all 0 if none is)."""
+    mean = signal[valid].mean() if valid.any() else 0.0
+    return np.where(valid, signal - mean, 0.0)
 
 
 def _test(lags: np.ndarray, values: np.ndarray, tested: np.ndarray, n: int) -> CorrelationTest:

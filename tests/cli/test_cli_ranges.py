@@ -10,6 +10,8 @@ import pytest
 from refusals import refused
 from test_cli_hostile_files import _recording
 
+from hframe_id.cli import main
+
 ROOT = Path(__file__).resolve().parents[2]
 H8 = ROOT / "models" / "hframe-8-table4.2.yaml"
 REC = ROOT / "datasets" / "4V_xmotion.mcap"
@@ -228,3 +230,17 @@ def test_import_time_beyond_the_device_clock(work, capsys):
     refused([*argv, "--variant", "a", "--out", "i.mcap"], capsys, "t.csv", "1e+300 s",
             "beyond the log's clock")  # fmt: skip
     assert sorted(p.name for p in work.iterdir()) == ["t.csv"]
+
+
+def test_validate_channel_with_no_valid_sample_warns_nothing(work, capsys):
+    """validate on a recording whose x laser is never valid printed numpy's 'Mean of empty
+    slice' and two division warnings; the channel is shown without scores, and no warning."""
+
+    def blind(i: int, message: dict) -> dict:
+        return {**message, "laser_x_m": None, "laser_x_valid": False}
+
+    rec = _recording(work / "blind.mcap", blind)
+    assert main(["validate", str(H8), str(rec), "--quiet", "--horizon", "0"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    assert "x  " in captured.out
