@@ -130,8 +130,15 @@ def parse_travel(values: list[str]) -> dict[str, tuple[float, float]]:
     return travel
 
 
-def _names(text: str | None) -> tuple[str, ...]:
-    return tuple(n.strip() for n in text.split(",") if n.strip()) if text else ()
+def _names(text: str | None, option: str) -> tuple[str, ...]:
+    """The comma-separated names given with ``option`` (none if it was not given); given but
+    naming none (``--free ''``) is an error, not the default set."""
+    if text is None:
+        return ()
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise OptionError(f"{option} {shown(text)}: names no parameter")
+    return names
 
 
 def run(args: argparse.Namespace) -> int:
@@ -149,8 +156,8 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.recordings.sensors import SensorModel
 
     options = DesignOptions(
-        criterion=Criterion(args.criterion, _names(args.focus)),
-        free=_names(args.free) or None,
+        criterion=Criterion(args.criterion, _names(args.focus, "--focus")),
+        free=_names(args.free, "--free") or None,
         draws=args.draws,
         seed=args.seed,
         prior_tables=_recorded_inputs(args.after, "--after"),

@@ -197,6 +197,15 @@ def test_fit_empty_free_list(work, capsys):
     assert list(work.iterdir()) == []
 
 
+@pytest.mark.parametrize("option", ["--free", "--focus"])
+def test_design_empty_name_list(work, capsys, option):
+    """design --free '' designed for the default free set, as if no --free were given."""
+    argv = ["design", "--params", H8, "--duration", "1", "--max-voltage", "2", "--out", "d.csv"]
+    refused([*argv, "--travel", "x=-0.2:0.2", "--travel", "y=-0.2:0.2", option, " , "], capsys,
+            option, "names no parameter")  # fmt: skip
+    assert list(work.iterdir()) == []
+
+
 @pytest.mark.parametrize(
     ("rig", "named"),
     [
