@@ -9,7 +9,6 @@ and the run simulated before anything is written.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -253,19 +252,17 @@ def run(args: argparse.Namespace) -> int:
 
             written = list(write_control_plots(result, args.plot, staging).values())
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "params": str(args.params),
-                    "variant": params.variant,
-                    "controller": controller.describe(),
-                    "trajectory": trajectory.name,
-                    "friction": friction.model,
-                    "legs": metrics_json(metrics),
-                },
-                indent=2,
-            )
-        )
+        from hframe_id.cli import json_output
+
+        document = {
+            "params": str(args.params),
+            "variant": params.variant,
+            "controller": controller.describe(),
+            "trajectory": trajectory.name,
+            "friction": friction.model,
+            "legs": metrics_json(metrics),
+        }
+        print(json_output.text(document))
     else:
         print(f"{params.variant} ({args.params}), {controller.describe()}, {trajectory.name}")
         print(f"{'leg':>4} {'overshoot [m]':>14} {'offset max [m]':>15}")

@@ -11,7 +11,6 @@ recording measures it, the rms deviation of the simulation from the measurement.
 from __future__ import annotations
 
 import argparse
-import json
 
 from hframe_id.cli.outputs import check_file, written_together
 from hframe_id.cli.progress import Progress
@@ -155,7 +154,9 @@ def run(args: argparse.Namespace) -> int:
         **summary(model, controller, result, recording),
     }
     if args.json:
-        print(json.dumps(document, indent=2))
+        from hframe_id.cli import json_output
+
+        print(json_output.text(document))
         return 0
     print(
         f"{params.variant} ({args.params}), controller {controller.name} "

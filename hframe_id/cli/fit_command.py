@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 import warnings
@@ -287,7 +286,9 @@ def run(args: argparse.Namespace) -> int:
     if report:
         print(f"report: {report}", file=human)
     if args.json:
-        print(json.dumps(fit_summary(result, fit_id, parameter_file, report), indent=2))
+        from hframe_id.cli import json_output
+
+        print(json_output.text(fit_summary(result, fit_id, parameter_file, report)))
     if not result.success:
         print(
             f"hframe-id: fit failed: {result.message}; no parameter file written", file=sys.stderr

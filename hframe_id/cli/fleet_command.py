@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from hframe_id.cli import signals
@@ -150,7 +149,9 @@ def run_report(args: argparse.Namespace) -> int:
         plots = plot_histories(frame, threshold, out / REPORT_PLOTS, staging)
         page = write_markdown(report, drifts, plots, out / REPORT_PAGE, staging)
     if args.json:
-        print(json.dumps(report, indent=2))
+        from hframe_id.cli import json_output
+
+        print(json_output.text(report))
         return 0
     by_status = ", ".join(f"{n} {s}" for s, n in report["by_status"].items())
     print(f"{report['fits']} fits of {report['rigs']} rigs ({by_status})")

@@ -30,6 +30,13 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def text(document: Any) -> str:
+    """``document`` as indented JSON by the one rule of every command's ``--json``: NaN and
+    infinities as null (``json.dumps`` wrote ``Infinity``, which no JSON reader accepts,
+    for a drift against a baseline of zero in ``fleet report --json``)."""
+    return json.dumps(_plain(document), indent=2, allow_nan=False)
+
+
 def dumps(command: str, payload: Mapping[str, Any]) -> str:
     """The JSON text of ``command``'s result: ``{"schema_version", "command", "software",
     **payload}``."""
@@ -39,7 +46,7 @@ def dumps(command: str, payload: Mapping[str, Any]) -> str:
         "software": f"hframe-id {__version__}",
         **payload,
     }
-    return json.dumps(_plain(document), indent=2, allow_nan=False)
+    return text(document)
 
 
 def emit(command: str, payload: Mapping[str, Any]) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 from hframe_id.errors import ParameterFileError
@@ -86,5 +85,10 @@ def run(args: argparse.Namespace) -> int:
             f"{args.file}: no poles and zeros for these values ({err}); the most extreme is "
             f"{_most_extreme(params.values)}"
         ) from None
-    print(json.dumps(report, indent=2) if args.json else format_text(report))
+    if args.json:
+        from hframe_id.cli import json_output
+
+        print(json_output.text(report))
+    else:
+        print(format_text(report))
     return 0

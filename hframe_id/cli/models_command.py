@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -44,7 +43,9 @@ def run(args: argparse.Namespace) -> int:
 
     described = [describe(v) for v in variants()]
     if args.json:
-        print(json.dumps(described, indent=2))
+        from hframe_id.cli import json_output
+
+        print(json_output.text(described))
         return 0
     for item in described:
         print(f"{item['variant']}: {item['description']}")

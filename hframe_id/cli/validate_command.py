@@ -6,7 +6,6 @@ errors with a declared controller (``--controller``)."""
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import warnings
 from typing import TYPE_CHECKING
@@ -165,7 +164,9 @@ def run(args: argparse.Namespace) -> int:
         with written_together() as staging:
             written = write_plots(result.recordings, plot_dir, staging)
     if args.json:
-        print(json.dumps(to_document(result), indent=2, allow_nan=False))
+        from hframe_id.cli import json_output
+
+        print(json_output.text(to_document(result)))
     else:
         print(to_text(result))
         if plot_dir is not None:

@@ -57,6 +57,14 @@ def successful(frame: pd.DataFrame) -> pd.DataFrame:
     return ok.sort_values(["rig", "run_time"], kind="stable")
 
 
+def _relative_change(baseline: float, latest: float) -> float:
+    """latest / baseline - 1; a change from a baseline of zero (a friction fitted to zero)
+    is infinite, or none if the latest is zero too (numpy's division warning it printed)."""
+    if baseline == 0:
+        return 0.0 if latest == 0 else math.copysign(math.inf, latest)
+    return float(latest / baseline - 1)
+
+
 def drift_table(frame: pd.DataFrame, threshold: float = DEFAULT_THRESHOLD) -> list[Drift]:
     """Every (rig, parameter) with at least two successful, identified runs."""
     rows = []
@@ -69,7 +77,7 @@ def drift_table(frame: pd.DataFrame, threshold: float = DEFAULT_THRESHOLD) -> li
             if len(usable) < 2:
                 continue
             first, last = usable.iloc[0], usable.iloc[-1]
-            change = last[value] / first[value] - 1
+            change = _relative_change(first[value], last[value])
             spread = math.hypot(last[std], first[std])
             difference = last[value] - first[value]
             z = difference / spread if spread > 0 else math.copysign(math.inf, difference)

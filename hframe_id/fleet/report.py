@@ -34,6 +34,8 @@ def plot_histories(
     names = []
     for name, unit in parameters_of(ok):
         value = f"{name} [{unit}]"
+        if not ok[value].notna().any():
+            continue  # no converged fit has it (matplotlib warned of an empty legend)
         fig = Figure(figsize=(7, 3.5))
         FigureCanvasAgg(fig)
         ax = fig.subplots()

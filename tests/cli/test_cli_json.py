@@ -5,6 +5,7 @@ states about clamped voltages and incomplete recordings."""
 from __future__ import annotations
 
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -165,3 +166,44 @@ def test_a_library_warning_reaches_the_user_as_one_line(half, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("hframe-id: warning: ") and err.count("\n") == 1
     assert ".py" not in err
+
+
+def _strict(text: str) -> dict:
+    """``text`` parsed as JSON, refusing NaN and Infinity (which no JSON reader accepts)."""
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_fleet_report_from_a_zero_baseline(tmp_path, capsys):
+    """A friction fitted to zero in a rig's first run: fleet report printed numpy's division
+    warning and --json wrote "change": Infinity; now null, and no warning."""
+    from datetime import UTC, datetime
+
+    from fit_rows import stored_fits
+
+    runs = [("k0", "rig-01", datetime(2026, 1, 5, tzinfo=UTC), 0.0),
+            ("k1", "rig-01", datetime(2026, 1, 12, tzinfo=UTC), 100.0)]  # fmt: skip
+    results = stored_fits(tmp_path / "r.parquet", runs)
+    assert main(["fleet", "report", str(results), "--json", "--out", str(tmp_path / "rep")]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    (drift,) = _strict(captured.out)["flagged"]
+    assert drift["change"] is None and drift["baseline"] == 0.0
+
+
+def test_fleet_report_of_a_parameter_no_fit_has(tmp_path, capsys):
+    """A parameter without a value in any converged fit: matplotlib's 'No artists with labels
+    found to put in legend' reached the user; now it has no plot."""
+    from datetime import UTC, datetime
+
+    from fit_rows import stored_fits
+
+    results = stored_fits(
+        tmp_path / "r.parquet", [("k0", "rig-01", datetime(2026, 1, 5, tzinfo=UTC), math.nan)]
+    )
+    assert main(["fleet", "report", str(results), "--out", str(tmp_path / "rep")]) == 0
+    assert capsys.readouterr().err == ""
+    assert not (tmp_path / "rep" / "plots" / "k_l.png").exists()
