@@ -194,14 +194,26 @@ def run_batch(
     if not pending:
         summary.wall_time_s = time.perf_counter() - start
         return summary
+    made = not out_dir.exists()
     try:
         with connect() as client:
             _run(client, pending, store, summary, out_dir, reports, flush_interval_s, progress)
     finally:  # the unfinished fits' files (their workers are stopped by now, local ones)
         for _, key, _ in pending:
             shutil.rmtree(staged_folder(out_dir, key), ignore_errors=True)
+        if made:
+            _remove_if_empty(out_dir)
     summary.wall_time_s = time.perf_counter() - start
     return summary
+
+
+def _remove_if_empty(folder: Path) -> None:
+    """Remove ``folder`` if nothing is in it: the batch made it, and no fit stored files
+    there (Ctrl-C before the first row left an empty ``<results>-fits/``)."""
+    try:
+        folder.rmdir()
+    except OSError:  # not empty, or gone
+        pass
 
 
 def place_files(row: dict[str, Any], out_dir: Path) -> dict[str, Any]:

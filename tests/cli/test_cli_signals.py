@@ -244,6 +244,29 @@ def test_batch_interrupted_leaves_no_file_without_its_row(tmp_path):
         rows = pd.read_parquet(tmp_path / "r.parquet")
         stored = {Path(f).name for f in rows["parameter_file"].dropna()}
     assert files <= stored, (files, stored)
+    assert stored or not fits.exists()  # no empty folder of fits left behind
+
+
+def test_batch_interrupted_before_any_row_removes_the_fits_folder_it_made(tmp_path):
+    """Ctrl-C before the first row left an empty ``r-fits/`` beside no results file."""
+    from contextlib import contextmanager
+
+    from hframe_id.fleet.manifest import load_manifest
+    from hframe_id.fleet.runner import run_batch
+    from hframe_id.fleet.store import ResultsStore
+
+    out = tmp_path / "r-fits"
+
+    @contextmanager
+    def interrupted_cluster():
+        out.mkdir()  # as a worker staging its fit does
+        raise KeyboardInterrupt
+        yield
+
+    jobs = load_manifest(_manifest(tmp_path))
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(jobs, ResultsStore(tmp_path / "r.parquet"), interrupted_cluster, out)
+    assert not out.exists()
 
 
 def test_batch_on_an_unreachable_scheduler_is_one_line(tmp_path, capsys, monkeypatch):
