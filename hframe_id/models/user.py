@@ -230,15 +230,39 @@ def _hanging(kind: str, path: Path, seconds: float) -> str:
 
 
 @contextmanager
+def _signal_handling_kept() -> Iterator[None]:
+    """The process's handlers of SIGINT, SIGTERM and SIGHUP and its signal wake-up, put back
+    as they were once a file's code has run: a model file ignoring SIGINT and SIGTERM at
+    import made the command impossible to interrupt but by SIGKILL. Only the main thread
+    can set them (a Dask worker's thread leaves them alone)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    stopping = (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None))
+    handlers = {s: signal.getsignal(s) for s in stopping if s is not None}
+    wakeup = signal.set_wakeup_fd(-1)
+    signal.set_wakeup_fd(wakeup, warn_on_full_buffer=False)
+    try:
+        yield
+    finally:
+        for signum, handler in handlers.items():
+            if handler is not None:  # None: set outside Python, cannot be put back
+                signal.signal(signum, handler)
+        signal.set_wakeup_fd(wakeup, warn_on_full_buffer=False)
+
+
+@contextmanager
 def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iterator[None]:
     """Run a model or controller file's code (``kind``: ``"model file"``, ...) so that every
     way it can end and come back to Python is one ``error`` naming the file: an exception
     (with the file's line; any ``BaseException``, ``GeneratorExit`` too), ``sys.exit`` (any
     status, 0 too) or a ``KeyboardInterrupt`` it raises itself. The user's own Ctrl-C or
     SIGTERM (``Interrupted``) passes through, to end the command. The ways that do not come
-    back (``os._exit``, a crash, a hang) are found before, by ``load_guarded``'s probe."""
+    back (``os._exit``, a crash, a hang) are found before, by ``load_guarded``'s probe.
+    The file cannot change how the command meets Ctrl-C (``_signal_handling_kept``)."""
     try:
-        yield
+        with _signal_handling_kept():
+            yield
     except ModelError as err:
         message = str(err)
         raise error(message if str(path) in message else f"{path}: {message}") from None

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -241,3 +242,31 @@ def test_a_thread_left_by_a_refused_file_does_not_keep_the_command_alive(tmp_pat
     done = _hframe_id(argv, timeout=100)
     assert time.monotonic() - start < 60
     _one_error_line(done, f"{kind} file", source, "defines no")
+
+
+def test_a_model_file_ignoring_ctrl_c_cannot_keep_the_command_running(tmp_path):
+    """A model file setting SIGINT and SIGTERM to be ignored at import made a long simulation
+    impossible to interrupt (only SIGKILL ended it): the command's handlers are put back
+    once the file has run, and Ctrl-C ends it with exit status 130, writing nothing."""
+    shutil.copy(EMPS_PARAMS, tmp_path)  # the model's reference file, beside it
+    model = tmp_path / "deaf.py"
+    deaf = "import signal\nfor s in (signal.SIGINT, signal.SIGTERM):\n"
+    model.write_text(deaf + "    signal.signal(s, signal.SIG_IGN)\n" + EMPS_MODEL.read_text())
+    argv = ["simulate", "--model-file", model, "--params", EMPS_PARAMS, "--step", "1,1"]
+    argv += ["--duration", "3000", "--out", tmp_path / "s.csv"]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hframe_id", *map(str, argv)],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        time.sleep(5)  # start-up, the model's equations, the simulation under way
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=20)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "hframe-id: interrupted: SIGINT received"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["deaf.py", EMPS_PARAMS.name]
