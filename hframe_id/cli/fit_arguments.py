@@ -12,6 +12,13 @@ from hframe_id.fitting.link_options import CONSIDER_METHODS, CONTINUITY, UNCERTA
 from hframe_id.fitting.options import NOISE_METHODS, FitOptions
 from hframe_id.fitting.solvers import solver_names
 
+#: Most fits a multistart portfolio may run (``--starts``): each is a whole fit (2-5 s on a
+#: shipped recording); 100000 ran for hours.
+MAX_STARTS = 100
+#: Most Gauss-Newton iterations per stage (``--max-iterations``, default 150): a stage that
+#: does not converge runs all of them.
+MAX_ITERATIONS = 10_000
+
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Shows defaults, except empty ones and flags (their help says what happens)."""
@@ -199,6 +206,7 @@ def _add_strategy_options(parser: argparse.ArgumentParser) -> None:
         "--starts",
         int,
         at_least=1,
+        at_most=MAX_STARTS,
         default=FitOptions.starts,
         metavar="N",
         help="a multistart portfolio: the fit from the start and from N-1 seeded draws "
@@ -255,6 +263,7 @@ def _add_convergence_options(parser: argparse.ArgumentParser) -> None:
         "--max-iterations",
         int,
         at_least=1,
+        at_most=MAX_ITERATIONS,
         default=FitOptions.max_iterations,
         help="Gauss-Newton iterations per stage",
     )

@@ -130,6 +130,8 @@ FLEET_MAKE = ["fleet", "make", "--out", "fleet"]
 OUT_OF_RANGE = [
     (FIT, "--shooting-interval", "0"),
     (FIT, "--starts", "0"),
+    (FIT, "--starts", "100000"),  # ran for hours
+    (FIT, "--max-iterations", "1000000000"),
     (FIT, "--start-seed", "-1"),
     (FIT, "--max-iterations", "0"),
     (FIT, "--bound-factor", "1"),
