@@ -13,6 +13,7 @@ from pathlib import Path
 from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import (
     add_force_option,
+    check_distinct,
     check_file,
     check_length,
     output_file,
@@ -179,6 +180,7 @@ def _recorded_inputs(paths: list[Path], option: str) -> tuple:
 
     from hframe_id.recordings.reader import read_recording
 
+    check_distinct(paths, option)
     tables = []
     for path in paths:
         recording = read_recording(path)

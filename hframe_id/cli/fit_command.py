@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from hframe_id.cli.fit_arguments import HelpFormatter, add_fit_arguments
 from hframe_id.cli.fit_options import fit_options
-from hframe_id.cli.outputs import check_dir, check_input
+from hframe_id.cli.outputs import check_dir, check_distinct, check_input
 from hframe_id.errors import FitError, ModelError, OptionError
 from hframe_id.figure_drawers import InlineDrawer, ProcessDrawer
 from hframe_id.fitting.options import FitOptions
@@ -219,6 +219,7 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
         # A start of another variant fails before the recordings are read.
         initial, initial_path = _initial(args, model)
     paths = [resolve_dataset(name) for name in args.files]
+    check_distinct(paths, "recording")
     recordings = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

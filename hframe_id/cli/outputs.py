@@ -293,6 +293,21 @@ def check_input(path: str | os.PathLike) -> Path:
     return path
 
 
+def check_distinct(paths: Iterable[str | os.PathLike], what: str) -> None:
+    """Refuse a file given twice among ``paths`` (by name or through a link): ``fit R R``
+    fitted one recording twice, doubling its weight and cross-validating it against itself."""
+    seen: list[Path] = []
+    for path in map(Path, paths):
+        for earlier in seen:
+            try:
+                same = os.path.samefile(earlier, path)
+            except OSError:  # missing: the reader says so
+                same = False
+            if same:
+                raise OptionError(f"{what} {path}: given twice (also as {earlier})")
+        seen.append(path)
+
+
 def check_length(duration_s: float, period_s: float, option: str) -> None:
     """Refuse a run of more than MAX_SAMPLES samples of ``period_s`` (``option`` names the
     setting at fault)."""

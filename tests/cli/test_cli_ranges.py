@@ -255,3 +255,12 @@ def test_validate_channel_with_no_valid_sample_warns_nothing(work, capsys):
     captured = capsys.readouterr()
     assert captured.err == ""
     assert "x  " in captured.out
+
+
+def test_fit_refuses_a_recording_given_twice(work, capsys):
+    """fit R R (here once through a link) fitted one recording twice: its weight doubled,
+    and its cross-validation held it out against itself."""
+    (work / "same.mcap").symlink_to(REC)
+    argv = ["fit", REC, "same.mcap", "--quiet", "--out-dir", "fits"]
+    refused(argv, capsys, "recording same.mcap", "given twice", REC.name)
+    assert sorted(p.name for p in work.iterdir()) == ["same.mcap"]
