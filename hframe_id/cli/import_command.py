@@ -6,7 +6,7 @@ import argparse
 import datetime as dt
 import sys
 
-from hframe_id.cli.outputs import add_force_option, check_file, check_input
+from hframe_id.cli.outputs import add_force_option, check_file, check_input, output_file
 from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 from hframe_id.recordings.import_spec import ROLES, ColumnMap, ImportSpec
@@ -52,7 +52,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "1-based) or 'data[:,2]' (NumPy, 0-based; the same column) and needs a NAME. Units: "
         f"{', '.join(KNOWN_UNITS)}",
     )
-    parser.add_argument("--out", required=True, metavar="PATH", help="the recording (.mcap)")
+    parser.add_argument(
+        "--out",
+        type=output_file("--out", ".mcap"),
+        required=True,
+        metavar="PATH",
+        help="the recording (.mcap)",
+    )
     add_force_option(parser)
     add_quiet_option(parser)
     parser.add_argument(

@@ -195,12 +195,17 @@ def _file_name(text: str, option: str) -> Path:
     return Path(text)
 
 
-def output_file(option: str) -> Callable[[str], Path]:
+def output_file(option: str, suffix: str | None = None) -> Callable[[str], Path]:
     """An argparse ``type=`` for an output file's option: its path, checked as
-    ``_file_name`` (the rest of the guard, ``check_file``, runs before the command's work)."""
+    ``_file_name`` and, given a ``suffix`` (``.mcap``), named with it: ``record --out
+    run.csv`` wrote a recording that ``--csv run.csv`` then failed to read (the rest of the
+    guard, ``check_file``, runs before the command's work)."""
 
     def parse(text: str) -> Path:
-        return _file_name(text, option)
+        path = _file_name(text, option)
+        if suffix is not None and path.suffix.lower() != suffix:
+            raise OptionError(f"{option} needs a {suffix} file name, got {shown(text)}")
+        return path
 
     return parse
 

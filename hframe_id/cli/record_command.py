@@ -101,7 +101,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     out = parser.add_argument_group("output")
     out.add_argument(
-        "--out", type=output_file("--out"), required=True, help="recording to write (.mcap)"
+        "--out",
+        type=output_file("--out", ".mcap"),
+        required=True,
+        help="recording to write (.mcap)",
     )
     add_force_option(out, "--overwrite")
     out.add_argument("--operator", help="who runs the experiment (default: login name)")

@@ -92,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=output_file("--out"), required=True, help="CSV file to write")
     parser.add_argument(
         "--mcap",
-        type=output_file("--mcap"),
+        type=output_file("--mcap", ".mcap"),
         help="also record the same inputs with the sim rig (sensor models) to this MCAP file",
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="--mcap: sensor noise seed (0)")
@@ -171,8 +171,6 @@ PLOT_FILE = "open_loop.png"
 
 
 def _check_writable(args: argparse.Namespace) -> None:
-    if args.mcap is not None and args.mcap.suffix != ".mcap":
-        raise OptionError(f"--mcap needs a .mcap file name, got {args.mcap}")
     for option, path in (("--out", args.out), ("--mcap", args.mcap)):
         if path is not None:
             check_file(path, option, args.force)

@@ -285,9 +285,9 @@ def test_import_on_a_full_disk_names_its_output(work, capsys, monkeypatch, fault
         (["export", "in.yaml", "--format", "json", "--out=in.yaml", "--force"], "in.yaml"),
         (["simulate", "--params", "in.yaml", *STEP, "--out", "link.csv", "--force"], "link.csv"),
         (["import", "in.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m",
-          "--variant", "a", "--out", "in.csv", "--force"], "in.csv"),
+          "--variant", "a", "--out", "link.mcap", "--force"], "link.mcap"),
     ],
-    ids=["reduce", "export", "simulate-through-a-link", "import"],
+    ids=["reduce", "export", "simulate-through-a-link", "import-through-a-link"],
 )  # fmt: skip
 def test_an_input_is_never_replaced_by_an_output(work, capsys, argv, name):
     """``reduce F --out F --force`` replaced the parameter file it read (so did export,
@@ -297,6 +297,7 @@ def test_an_input_is_never_replaced_by_an_output(work, capsys, argv, name):
     (work / "in.yaml").write_bytes(source.read_bytes())
     (work / "in.csv").write_text("t,u,x\n0,1,0\n0.001,1,0\n")
     (work / "link.csv").symlink_to("in.yaml")
+    (work / "link.mcap").symlink_to("in.csv")
     before = _listing(work)
     refused(argv, capsys, name, "is also an input of this command")
     assert _listing(work) == before
@@ -315,4 +316,22 @@ def test_two_outputs_on_one_path_are_refused_before_any_work(work, capsys, argv,
     under the file p: two outputs of one command on one path are refused at once."""
     before = _listing(work)
     refused(argv, capsys, named, "is written there too")
+    assert _listing(work) == before
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["record", "--rig", "sim", "--params", H8, "--fast", "--quiet", "--out", "run.csv"],
+        ["import", "log.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m",
+         "--variant", "a", "--out", "run.txt"],
+    ],
+    ids=["record", "import"],
+)  # fmt: skip
+def test_a_recording_is_written_under_an_mcap_name(work, capsys, argv):
+    """record --out run.csv wrote a recording that --csv run.csv then could not read; the
+    recording's name ends in .mcap, as simulate --mcap already asked."""
+    (work / "log.csv").write_text("t,u,x\n0,1,0\n0.001,1,0\n")
+    before = _listing(work)
+    refused(argv, capsys, "--out needs a .mcap file name", argv[-1])
     assert _listing(work) == before
