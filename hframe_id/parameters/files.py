@@ -158,6 +158,35 @@ def _values_from_keys(variant: str, raw: Any, where: str) -> dict[str, float]:
     return values
 
 
+#: The numbers of a parameter's entry in a fit's ``uncertainty.parameters`` that others read
+#: (``design`` draws around the estimate by the standard error): a number or null each.
+_UNCERTAINTY_NUMBERS = ("estimate", "std_error")
+
+
+def _check_uncertainty(uncertainty: Mapping[str, Any], where: str) -> None:
+    """A fit's ``uncertainty.parameters``, if there, is a mapping of parameter to a mapping
+    whose ``_UNCERTAINTY_NUMBERS`` are numbers or null (``parameters: [1, 2]`` or an entry
+    ``k_l [N/m]: 5`` made ``design --params`` end in an AttributeError traceback)."""
+    listed = uncertainty.get("parameters", {})
+    if not isinstance(listed, Mapping):
+        raise ParameterFileError(f"{where}: uncertainty.parameters must be a mapping")
+    for name, entry in listed.items():
+        if not isinstance(entry, Mapping):
+            raise ParameterFileError(
+                f"{where}: uncertainty.parameters.{shown(name)} must be a mapping, got "
+                f"{shown(entry)}"
+            )
+        for key in _UNCERTAINTY_NUMBERS:
+            value = entry.get(key)
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int | float)
+            ):
+                raise ParameterFileError(
+                    f"{where}: uncertainty.parameters.{shown(name)}.{key} must be a number or "
+                    f"null, got {shown(value)}"
+                )
+
+
 def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> ParameterSet:
     """Load and validate a parameter file.
 
@@ -198,6 +227,7 @@ def load_parameter_file(path: str | os.PathLike, variant: str | None = None) -> 
     for key in ("provenance", "uncertainty"):
         if key in doc and not isinstance(doc[key], Mapping):
             raise ParameterFileError(f"{where}: {shown(key)} must be a mapping")
+    _check_uncertainty(doc.get("uncertainty", {}), where)
     values = _values_from_keys(model, doc["parameters"], where)
     return ParameterSet(
         variant=model,

@@ -343,3 +343,19 @@ def test_import_source_that_is_not_a_file(work, capsys, make, problem):
     argv = ["import", "log.csv", "--map", "t=time:s", "--map", "u=input:V", "--map", "x=output:m"]
     refused([*argv, "--variant", "a", "--out", "i.mcap"], capsys, "log.csv", problem)
     assert not (work / "i.mcap").exists()
+
+
+@pytest.mark.parametrize(
+    ("block", "named"),
+    [
+        ("  parameters: [1, 2]\n", "uncertainty.parameters must be a mapping"),
+        ("  parameters:\n    k_l [N/m]: 5\n", "uncertainty.parameters.'k_l [N/m]' must be"),
+        ("  parameters:\n    k_l [N/m]: {std_error: lots}\n", ".std_error must be a number"),
+    ],
+    ids=["list", "entry", "std-error"],
+)
+def test_a_fits_uncertainty_of_the_wrong_shape(work, capsys, block, named):
+    """design --params on a file whose uncertainty section had the wrong shape ended in an
+    AttributeError traceback; the file is refused as it is read, by every command."""
+    path = _parameter_file(work / "fit.yaml", lambda t: t + "uncertainty:\n" + block)
+    refused(["params", "check", path], capsys, path, named)
