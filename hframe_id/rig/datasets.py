@@ -340,17 +340,21 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
 
 
 def verify_datasets(folder: str | Path) -> list[str]:
-    """Problems found checking each listed file's sha256 (empty if all match)."""
+    """Problems found checking each listed file's sha256 (empty if all match), each file
+    once: the truth file the datasets share was reported missing once per dataset, which
+    filled the error line before a changed recording was named."""
     folder = Path(folder)
     problems = []
+    checked = set()
     for entry in load_manifest(folder / MANIFEST)["datasets"]:
         for name, digest in (
             (entry["file"], entry["sha256"]),
             (entry["truth"], entry.get("truth_sha256")),
             (entry.get("reference"), entry.get("reference_sha256")),
         ):
-            if name is None:
+            if name is None or name in checked:
                 continue
+            checked.add(name)
             path = folder / name
             if not path.exists():
                 problems.append(f"{path}: missing")

@@ -359,3 +359,18 @@ def test_a_fits_uncertainty_of_the_wrong_shape(work, capsys, block, named):
     AttributeError traceback; the file is refused as it is read, by every command."""
     path = _parameter_file(work / "fit.yaml", lambda t: t + "uncertainty:\n" + block)
     refused(["params", "check", path], capsys, path, named)
+
+
+def test_datasets_verify_names_each_file_once(work, capsys):
+    """A copy of the datasets without its truth files and with one recording changed: the
+    shared truth file was reported missing once per dataset, and the bounded error line
+    ended before it named the changed recording."""
+    datasets = ROOT / "datasets"
+    copy = work / "copy"
+    copy.mkdir()
+    for path in [datasets / "manifest.yaml", *datasets.glob("*.mcap")]:
+        (copy / path.name).write_bytes(path.read_bytes())
+    with (copy / "6V_ymotion.mcap").open("ab") as stream:
+        stream.write(b"x")
+    line = refused(["datasets", "verify", "--dir", copy], capsys, "6V_ymotion.mcap: sha256 differs")
+    assert line.count("hframe-8-rig.yaml: missing") == 1
