@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import errno
 import importlib
+import io
 import os
 import sys
 import threading
@@ -152,6 +154,16 @@ def _detach_stdout() -> None:
     os.close(devnull)
 
 
+class _ClosedOutput(io.TextIOBase):
+    """Standard output for a process started without one (``hframe-id models >&-``), where
+    Python sets ``sys.stdout`` to None: ``print`` then dropped the output without a word and
+    the final flush ended in an AttributeError traceback. Writing fails with EBADF instead,
+    reported as one error line, as standard output on a full disk is."""
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.EBADF, os.strerror(errno.EBADF))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``hframe-id`` command: parse ``argv`` (default: the process's arguments), run the
     chosen subcommand and return its exit status (0 success, 1 a fit or check that failed,
@@ -161,6 +173,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     hframe_id``): if a model or controller file left a thread running, the process ends
     with the status at once rather than wait for it (``_end_despite_threads``).
     """
+    if sys.stdout is None:  # started without one: ``hframe-id models >&-``
+        sys.stdout = _ClosedOutput()
     code = _command(sys.argv[1:] if argv is None else list(argv))
     if argv is None:
         _end_despite_threads(code)

@@ -236,6 +236,22 @@ def test_standard_output_on_a_full_disk_is_one_line(tmp_path):
     assert done.stderr == "hframe-id: error: standard output: No space left on device\n"
 
 
+@pytest.mark.parametrize("argv", [["models"], ["inspect", str(REC), "--json"]])
+def test_a_closed_standard_output_is_one_line(argv):
+    """Started with standard output closed (``hframe-id models >&-``): an AttributeError
+    traceback at the final flush, the output dropped without a word."""
+    done = subprocess.run(
+        [sys.executable, "-m", "hframe_id", *argv],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=60,
+        preexec_fn=lambda: os.close(1),
+    )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == "hframe-id: error: standard output: Bad file descriptor\n"
+
+
 def test_a_path_too_long_for_the_file_system_is_one_line(work, capsys):
     """A 300-character file name: the output guard's checks raise ENAMETOOLONG, which was a
     traceback; the line shows the path shortened and the problem."""
