@@ -43,6 +43,10 @@ from hframe_id.recordings.samples import SampleColumns, decode_rig_samples, deco
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
+#: No MCAP record has opcode 0 (the spec's start at 0x01): where one is found the rest is
+#: not records, typically zeros (a preallocated or sparse file), which were walked 9 bytes a
+#: record, 19 s for 30 MB of zeros after the magic.
+_NO_OPCODE = 0x00
 
 
 class TruncatedRecordingWarning(UserWarning):
@@ -121,6 +125,9 @@ def read_log(path: str | os.PathLike) -> LogContents:
             log.problem = f"file ends inside a record header at byte {position}"
             break
         opcode, length = _RECORD_HEAD.unpack_from(data, position)
+        if opcode == _NO_OPCODE:
+            log.problem = f"corrupt record at byte {position} (opcode 0x00: zero-filled?)"
+            break
         start = position + _RECORD_HEAD.size
         end = start + length
         if end > len(data):

@@ -374,3 +374,26 @@ def test_datasets_verify_names_each_file_once(work, capsys):
         stream.write(b"x")
     line = refused(["datasets", "verify", "--dir", copy], capsys, "6V_ymotion.mcap: sha256 differs")
     assert line.count("hframe-8-rig.yaml: missing") == 1
+
+
+def test_a_zero_filled_recording_is_refused_at_once(work, capsys):
+    """The MCAP magic and then 200 MB of zeros (sparse): walked as 9-byte records for over
+    two minutes; a record of opcode 0 ends the readable part at once."""
+    path = work / "zeros.mcap"
+    with path.open("wb") as stream:
+        stream.write(REC.read_bytes()[:8])
+        stream.truncate(200 * 2**20)
+    refused(["inspect", path], capsys, path, "byte 8", "opcode 0x00")
+
+
+def test_a_recording_followed_by_zeros_is_salvaged(work, capsys):
+    """What comes before the zeros (a writer's preallocated file) is recovered."""
+    data = REC.read_bytes()
+    end = 8  # after the magic: whole records (opcode, length, body) up to 40 kB
+    while end < 40_000:
+        end += 9 + int.from_bytes(data[end + 1 : end + 9], "little")
+    path = work / "padded.mcap"
+    path.write_bytes(data[:end] + bytes(1_000_000))
+    assert main(["inspect", str(path)]) == 0
+    shown_to_user = capsys.readouterr()
+    assert "opcode 0x00" in shown_to_user.out + shown_to_user.err
