@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from hframe_id.cli import signals
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import check_dir, check_file
+from hframe_id.cli.outputs import check_dir, check_file, output_folder
 from hframe_id.errors import Interrupted, OptionError
 
 if TYPE_CHECKING:  # Dask is imported when a batch runs, not for --help
@@ -63,6 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--force", action="store_true", help="redo fits already stored")
     parser.add_argument(
         "--out-dir",
+        type=output_folder("--out-dir"),
         metavar="DIR",
         help="where parameter files and reports go (default: <results stem>-fits/ beside "
         "the results)",

@@ -19,6 +19,7 @@ from hframe_id.cli.outputs import (
     check_file,
     check_length,
     output_file,
+    output_folder,
     written_together,
 )
 from hframe_id.cli.progress import Progress, add_quiet_option
@@ -119,7 +120,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_substeps(parser)
     out = parser.add_argument_group("output")
     out.add_argument("--json", action="store_true", help="print the metrics as JSON")
-    out.add_argument("--plot", type=Path, metavar="DIR", help="write the four figures here")
+    out.add_argument(
+        "--plot", type=output_folder("--plot"), metavar="DIR", help="write the four figures here"
+    )
     out.add_argument(
         "--csv", type=output_file("--csv"), help="write the closed-loop signals to this CSV file"
     )

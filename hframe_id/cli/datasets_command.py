@@ -13,7 +13,7 @@ from pathlib import Path
 
 from hframe_id.cli import signals
 from hframe_id.cli.json_output import emit
-from hframe_id.cli.outputs import check_dir, written_together
+from hframe_id.cli.outputs import check_dir, output_folder, written_together
 from hframe_id.errors import LogFormatError, renamed
 
 
@@ -29,7 +29,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     make = actions.add_parser("make", help="(re)generate truth files, recordings, manifest")
     make.add_argument(
-        "--out", type=Path, help="folder (datasets; with --realistic datasets/realistic)"
+        "--out",
+        type=output_folder("--out"),
+        help="folder (datasets; with --realistic datasets/realistic)",
     )
     make.add_argument(
         "--realistic", action="store_true", help="the realistic-plant datasets instead"
@@ -90,7 +92,12 @@ def run_make(args: argparse.Namespace) -> int:
         signals.check()  # an interrupt swallowed while recording (numpy, CasADi): ends here
         print(f"{spec.file:<20} {summary.samples} samples, truth {spec.truth}, seed {spec.seed}")
 
-    out = check_dir(args.out or ("datasets/realistic" if args.realistic else "datasets"), "--out")
+    out = check_dir(
+        args.out
+        if args.out is not None
+        else ("datasets/realistic" if args.realistic else "datasets"),
+        "--out",
+    )
     with written_together() as staging, _scratch(out) as scratch:
         if args.only and (out / MANIFEST).is_file():
             shutil.copyfile(out / MANIFEST, scratch / MANIFEST)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 
 from hframe_id.cli.numbers import add_number
+from hframe_id.cli.outputs import output_folder
 from hframe_id.fitting.link_options import CONSIDER_METHODS, CONTINUITY, UNCERTAINTY_METHODS
 from hframe_id.fitting.options import NOISE_METHODS, FitOptions
 from hframe_id.fitting.solvers import solver_names
@@ -343,7 +344,12 @@ def _add_output_options(parser: argparse.ArgumentParser) -> None:
         help="skip the leave-one-recording-out cross-validation of a fit of several "
         "recordings (it refits once per recording)",
     )
-    parser.add_argument("--out-dir", default="fits", help="where the fit and report go")
+    parser.add_argument(
+        "--out-dir",
+        type=output_folder("--out-dir"),
+        default="fits",
+        help="where the fit and report go",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument(
         "--no-plots", action="store_true", help="write the report without its figures (faster)"

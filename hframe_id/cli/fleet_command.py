@@ -8,7 +8,7 @@ from pathlib import Path
 
 from hframe_id.cli import signals
 from hframe_id.cli.numbers import add_number
-from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.cli.outputs import add_force_option, check_dir, output_folder, written_together
 from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 
@@ -45,7 +45,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         make, "--weeks", int, at_least=2, required=True, metavar="W", help="weekly runs (>= 2)"
     )
     add_number(make, "--seed", int, at_least=0, default=0, metavar="S", help="random seed")
-    make.add_argument("--out", required=True, metavar="DIR", help="new (or empty) folder")
+    make.add_argument(
+        "--out",
+        type=output_folder("--out"),
+        required=True,
+        metavar="DIR",
+        help="new (or empty) folder",
+    )
     make.add_argument(
         "--plant",
         choices=("sim", "realistic"),
@@ -75,6 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     report.add_argument(
         "--out",
+        type=output_folder("--out"),
         metavar="DIR",
         help="plots and fleet-report.md go here (default: <results stem>-report/)",
     )
@@ -138,7 +145,7 @@ def run_report(args: argparse.Namespace) -> int:
     results = Path(args.results)
     if not results.is_file():
         raise OptionError(f"{results}: no such results file")
-    out = Path(args.out) if args.out else results.with_name(f"{results.stem}-report")
+    out = args.out if args.out is not None else results.with_name(f"{results.stem}-report")
     check_dir(out, "--out", files=(REPORT_PAGE,), folders=(REPORT_PLOTS,), force=args.force)
     frame = read_results(results)
     if frame.empty:

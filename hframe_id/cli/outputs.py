@@ -210,6 +210,20 @@ def output_file(option: str, suffix: str | None = None) -> Callable[[str], Path]
     return parse
 
 
+def output_folder(option: str) -> Callable[[str], Path]:
+    """An argparse ``type=`` for an output folder's option: its path, not empty (``--plot
+    ''`` made validate draw nothing without a word, fleet report and datasets make use their
+    default folder, and fleet make fail after its work); the rest of the guard,
+    ``check_dir``, runs before the command's work."""
+
+    def parse(text: str) -> Path:
+        if not text.strip():
+            raise OptionError(f"{option} {shown(text)}: a folder's path is needed")
+        return Path(text)
+
+    return parse
+
+
 def check_file(
     path: str | os.PathLike, option: str, force: bool = False, make_parents: bool = False
 ) -> Path:
@@ -238,6 +252,8 @@ def check_dir(
     ``force``. With ``empty`` the folder is the output, filled as a whole: it must not exist
     or be empty. Creates nothing."""
     path = Path(path)
+    if empty and path.name in ("", ".", ".."):  # a rename cannot replace "." or "/"
+        raise OptionError(f"{option} {path}: name the new folder, not . or .. or /")
     _check_target(path, option, force=True, folder=True, replaced=empty)
     if empty and path.is_dir():
         try:

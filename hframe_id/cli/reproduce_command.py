@@ -11,7 +11,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.cli.outputs import add_force_option, check_dir, output_folder, written_together
 from hframe_id.cli.progress import Progress, add_quiet_option
 
 #: The shipped parameter file reproduced by default (found wherever the command runs: a
@@ -27,7 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Simulate the four gain sets of sections 5.4-5.5 on the 1 in square and "
         "compare with Tables 5.1, 5.3, 5.4, 5.5 and 5.6 (report.md and plots/ in --out).",
     )
-    parser.add_argument("--out", type=Path, required=True, help="report directory")
+    parser.add_argument(
+        "--out", type=output_folder("--out"), required=True, help="report directory"
+    )
     add_force_option(parser)
     parser.add_argument(
         "--params",

@@ -23,6 +23,7 @@ from hframe_id.cli.outputs import (
     check_file,
     check_length,
     output_file,
+    output_folder,
     written_together,
 )
 from hframe_id.cli.progress import Progress, add_quiet_option
@@ -96,7 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="also record the same inputs with the sim rig (sensor models) to this MCAP file",
     )
     add_number(parser, "--seed", int, at_least=0, default=0, help="--mcap: sensor noise seed (0)")
-    parser.add_argument("--plot", type=Path, metavar="DIR", help="write open_loop.png here")
+    parser.add_argument(
+        "--plot", type=output_folder("--plot"), metavar="DIR", help="write open_loop.png here"
+    )
     add_force_option(parser, "--overwrite")
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object (docs/cli-json.md)"

@@ -11,7 +11,7 @@ import warnings
 from typing import TYPE_CHECKING
 
 from hframe_id.cli.fit_command import resolve_dataset
-from hframe_id.cli.outputs import add_force_option, check_dir, written_together
+from hframe_id.cli.outputs import add_force_option, check_dir, output_folder, written_together
 from hframe_id.cli.progress import Progress, add_quiet_option
 from hframe_id.errors import OptionError
 
@@ -101,7 +101,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "benchmarks' discontinuous law, their published numbers; default), smooth (the "
         "model's tanh, as fitted) or stick-slip (Table 2.2)",
     )
-    parser.add_argument("--plot", metavar="DIR", help="write compare and resid PNGs to DIR")
+    parser.add_argument(
+        "--plot",
+        type=output_folder("--plot"),
+        metavar="DIR",
+        help="write compare and resid PNGs to DIR",
+    )
     add_force_option(parser)
     add_quiet_option(parser)
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -153,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     for name, recording in zip(args.recordings, recordings, strict=True):
         _check_lengths(options, name, len(recording.time_s))
     plot_dir = None
-    if args.plot:
+    if args.plot is not None:
         names = plot_names([r.name() for r in recordings], labels_of(parameter_sets))
         plot_dir = check_dir(args.plot, "--plot", files=names, force=args.force)
     what = f"validating {len(parameter_sets)} parameter file(s) on {len(recordings)} recording(s)"

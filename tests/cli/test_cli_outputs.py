@@ -351,3 +351,31 @@ def test_a_recording_is_written_under_an_mcap_name(work, capsys, argv):
     before = _listing(work)
     refused(argv, capsys, "--out needs a .mcap file name", argv[-1])
     assert _listing(work) == before
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["validate", H8, REC, "--plot", ""],
+        ["fit", REC, "--out-dir", " "],
+        ["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", ""],
+        ["reproduce", "--out", ""],
+        ["datasets", "make", "--only", "4V_xmotion.mcap", "--out", ""],
+    ],
+    ids=["validate-plot", "fit-out-dir", "fleet-make", "reproduce", "datasets-make"],
+)
+def test_an_empty_folder_path_is_refused(work, capsys, argv):
+    """validate --plot '' drew nothing without a word, datasets make --out '' wrote into
+    ./datasets, fleet make --out '' failed after its work leaving a hidden folder."""
+    before = _listing(work)
+    refused(argv, capsys, argv[argv.index(argv[-1]) - 1], "a folder's path is needed")
+    assert _listing(work) == before
+
+
+def test_fleet_make_into_the_current_folder_is_refused(work, capsys, monkeypatch):
+    """fleet make --out . (an empty current folder) recorded the fleet, then could not put
+    its folder in place of '.' and left a hidden folder behind."""
+    (work / "empty").mkdir()
+    monkeypatch.chdir(work / "empty")
+    refused(["fleet", "make", "--rigs", "1", "--weeks", "2", "--out", "."], capsys, "--out .")
+    assert list((work / "empty").iterdir()) == []
