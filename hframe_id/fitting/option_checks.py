@@ -7,10 +7,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import sys
 from dataclasses import fields
 from typing import Any
-
-import numpy as np
 
 from hframe_id.errors import OptionError, shown
 
@@ -106,10 +105,13 @@ def changed_fields(settings: Any) -> dict[str, Any]:
 
 
 def _plain(value: Any) -> Any:
-    """``value`` with NumPy numbers as Python's (a parameter file holds plain data)."""
+    """``value`` with NumPy numbers as Python's (a parameter file holds plain data). NumPy
+    is not imported for it: a NumPy number exists only once NumPy is (``fit --help`` reads
+    these modules and needs none of it)."""
     if isinstance(value, tuple | list):
         return type(value)(_plain(v) for v in value)
-    return value.item() if isinstance(value, np.generic) else value
+    numpy = sys.modules.get("numpy")
+    return value.item() if numpy is not None and isinstance(value, numpy.generic) else value
 
 
 def as_tuple(value: Any) -> tuple | None:

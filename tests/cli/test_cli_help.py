@@ -22,7 +22,7 @@ try:
     main(sys.argv[1:])
 except SystemExit:
     pass
-print("imported:", *sorted(m for m in sys.modules if m.split(".")[0] in ("casadi", "scipy",
+print("imported:", *sorted(m for m in sys.modules if m.split(".")[0] in ("casadi", "scipy", "numpy",
       "pandas", "matplotlib") or m in ("hframe_id.models", "hframe_id.fitting.fit")))
 """
 
