@@ -47,7 +47,7 @@ from hframe_id.fitting.start_screen import (
     known_candidates,
     screen_start,
 )
-from hframe_id.fitting.stiffness_wall import wall_parameters
+from hframe_id.fitting.stiffness_wall import at_the_wall
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -295,15 +295,10 @@ def _off_the_wall(
 
 
 def _at_the_wall(result: FitResult, recordings) -> tuple[str, ...]:
-    """``stiffness_wall.wall_parameters`` at ``result``'s end point."""
-    problem = result.problem
-    model = problem.model
+    """``stiffness_wall.at_the_wall`` at ``result``'s end point."""
+    model = result.problem.model
     p = np.array([result.parameters.values[spec.name] for spec in model.parameters])
-    smoothing = result.options.smoothing or model.options.smoothing
-    dt = recordings[0].sample_period_s
-    return wall_parameters(
-        model, p, problem.free_names, smoothing, dt, result.options.transcription_options
-    )
+    return at_the_wall(result.problem, p, result.options, recordings[0].sample_period_s)
 
 
 def _with_open_ends(result: FitResult, ends) -> FitResult:

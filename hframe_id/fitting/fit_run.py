@@ -24,6 +24,7 @@ from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.stages import estimate_states
+from hframe_id.fitting.stiffness_wall import at_the_wall
 from hframe_id.fitting.statistics import Statistics, compute_statistics
 
 
@@ -91,6 +92,12 @@ class FitRun:
         return compute_statistics(
             jac, residual, blocks, solver.ms.n_nuisance, names, self.options.uncertainty
         )
+
+    def against_the_wall(self, theta: np.ndarray) -> tuple[str, ...]:
+        """The free parameters that put the log-parameters ``theta`` against the stiffness
+        wall (``stiffness_wall.at_the_wall``; empty: not against it)."""
+        p = self.problem.parameters(theta)
+        return at_the_wall(self.problem, p, self.options, self.ms.dt)
 
     def trial(self, label: str) -> FitRun:
         """The run for a trial solve whose stages are judged before they join the fit's: its

@@ -75,13 +75,19 @@ def fit_in_box(
     issue 25, the rounds took 25 of the 27 s of a fit whose six friction terms ended on the
     box after the first solve and stayed there). ``screened``: ``initial`` is the start
     screen's choice (``start_screen``), which judged the equation-error estimate already, by
-    the criterion the fit is judged by: the stages begin from ``initial`` as it is."""
+    the criterion the fit is judged by: the stages begin from ``initial`` as it is.
+    A stage that ends against the stiffness wall ends the fit there: ``max_substeps``
+    decided that point, and the strategy restarts off the wall (``fit._off_the_wall``)
+    instead of running the later stages there, each integrating every window with
+    ``max_substeps`` substeps."""
     run = _started_run(recordings, initial, options, regress=not screened)
     at = Standing(run, recordings, run.problem.channel_std.copy())
     for stage in strategy(run, may_widen):
         at = stage(at)
         if at.ended is not None:
             return at.ended
+        if at.run.against_the_wall(at.best.state.theta):
+            break
     return _finished(at)
 
 

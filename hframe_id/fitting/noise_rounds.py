@@ -110,6 +110,11 @@ def estimate_noise(
     none if its levels are settled at ``state``), ``state`` (its ``solver``) counting as
     the converged round before it.
 
+    The rounds end at a round that ends against the stiffness wall
+    (``FitRun.against_the_wall``): ``max_substeps``, not the data, decides that point, and
+    the strategy restarts off the wall (``fit._off_the_wall``) rather than weigh on there
+    (each round at the wall integrates every window with ``max_substeps`` substeps).
+
     A last round that stalls is rejected, as a trust region rejects a step: the fit is the
     last converged round's optimum (a real trajectory at its weights), marked by a
     ``REJECTED_ROUND_STAGE`` stage, with the levels reported as not settled. A round before
@@ -138,11 +143,12 @@ def estimate_noise(
         state, gn = warm_solve(run, state, label)
         if stages[-1].converged:
             accepted = (run, state, gn, rounds)
-    else:
-        if not stages[-1].converged and accepted is not None:
-            run, state, gn, kept = accepted
-            stages.append(_rejected_round_report(stages[-1], kept, run.ms, state))
-        change = _change(noise_levels(run.ms, state, sensor_std), run.problem.channel_std)
+        if run.against_the_wall(state.theta):
+            break
+    if not stages[-1].converged and accepted is not None:
+        run, state, gn, kept = accepted
+        stages.append(_rejected_round_report(stages[-1], kept, run.ms, state))
+    change = _change(noise_levels(run.ms, state, sensor_std), run.problem.channel_std)
     return run, state, gn, rounds, NoiseSettling(change, change <= strategy.noise_rtol)
 
 

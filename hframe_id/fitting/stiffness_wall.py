@@ -114,3 +114,13 @@ def wall_parameters(
         if np.any(np.abs(np.log(ratio)) > DEPENDENCE * DIFFERENCE_STEP):
             out.append(name)
     return tuple(out)
+
+
+def at_the_wall(problem, p: np.ndarray, options, dt: float) -> tuple[str, ...]:
+    """``wall_parameters`` of a fit's ``problem`` (``FitProblem``: its model and free
+    parameters) at all parameters ``p`` (SI, model order) under its ``options``
+    (``FitOptions``: smoothing, transcription) and sample period ``dt`` [s]."""
+    smoothing = options.smoothing or problem.model.options.smoothing
+    return wall_parameters(
+        problem.model, p, problem.free_names, smoothing, dt, options.transcription_options
+    )
