@@ -198,3 +198,31 @@ def test_a_fit_on_the_default_box_ends_with_its_result_as_it_stands(on_the_box):
     run.result = lambda best: result
     at = local_fit.OnTheBox()(_standing(run))
     assert (at.ended is result) is on_the_box
+
+
+def _stage_to(theta, called):
+    """A stage that moves the fit to ``theta`` (a 1-vector), noting that it ran."""
+
+    def stage(at):
+        called.append(theta)
+        state = SimpleNamespace(theta=np.array([theta]))
+        return local_fit.Standing(at.run, at.recordings, at.sensor_std, best=Fitted(state, 0, 0))
+
+    return stage
+
+
+def test_a_stage_ending_against_the_stiffness_wall_ends_the_fit_there(monkeypatch):
+    """The stages after one that ends against the wall (here, at theta 1) do not run: the
+    fit ends at that stage's point, which the strategy restarts off the wall."""
+    run = _run()
+    run.problem = SimpleNamespace(channel_std=np.ones(2))
+    run.against_the_wall = lambda theta: ("J_M1",) if theta[0] == 1.0 else ()
+    called = []
+    stages = tuple(_stage_to(t, called) for t in (0.0, 1.0, 2.0))
+    monkeypatch.setattr(local_fit, "_started_run", lambda *args, **kwargs: run)
+    monkeypatch.setattr(local_fit, "strategy", lambda run, may_widen: stages)
+    monkeypatch.setattr(local_fit, "_finished", lambda at: at.best.state.theta[0])
+    assert local_fit.fit_in_box([], None, run.options) == 1.0
+    assert called == [0.0, 1.0]
+    run.against_the_wall = lambda theta: ()
+    assert local_fit.fit_in_box([], None, run.options) == 2.0
