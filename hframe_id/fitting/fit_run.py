@@ -24,8 +24,8 @@ from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.stages import estimate_states
-from hframe_id.fitting.stiffness_wall import at_the_wall
 from hframe_id.fitting.statistics import Statistics, compute_statistics
+from hframe_id.fitting.stiffness_wall import at_the_wall
 
 
 @dataclass
