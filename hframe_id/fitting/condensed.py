@@ -206,7 +206,7 @@ class CondensedModel:
                     Block(
                         label=f"{exp.name}:{name}",
                         rows=rows,
-                        sigma=float(self.problem.channel_std[j]),
+                        sigma=float(self.problem.recording_std[e, j]),
                         quantization_step=float(self.problem.quantization[j]),
                         measured=measured[rows],
                     )

@@ -24,13 +24,14 @@ the sensors' noise std per channel,
 
     C(p) = 1/2 sum_recordings sum_channels sum_valid samples ((y - y_sim(p)) / std_j)^2,
 
-or, where the fit estimated its noise levels (model mismatch), concentrated over them: every
-point gets the levels s_j >= sensor std_j that suit it best,
+or, where the fit estimated its noise levels (model mismatch: one per recording e and
+channel j, ``noise_rounds``), concentrated over them: every point gets the levels
+s_ej >= sensor std_j that suit it best,
 
-    C(p) = sum_j N_j / 2 ln(s_j^2) + SSR_j(p) / (2 s_j^2) - N_j / 2,
-    s_j^2 = max(SSR_j(p) / N_j, std_j^2),
+    C(p) = sum_ej N_ej / 2 ln(s_ej^2) + SSR_ej(p) / (2 s_ej^2) - N_ej / 2,
+    s_ej^2 = max(SSR_ej(p) / N_ej, std_j^2),
 
-which is sum_j N_j / 2 ln(SSR_j / N_j) while every channel is above its sensor's noise. The
+which is sum_ej N_ej / 2 ln(SSR_ej / N_ej) while every channel is above its sensor's noise. The
 floor is the noise rounds' (``noise_rounds.noise_levels``): without it a point that fits one
 channel below its sensor's noise gains without bound (ln 0) whatever it does to the others.
 Judged under the fit's own levels, which come from its own residuals, any other point would
@@ -51,7 +52,7 @@ no worse than the failed fit's end (``fit._never_worse_than_known``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -142,22 +143,23 @@ def _simulated(params: ParameterSet, recordings, initial_states) -> list | None:
 def simulation_criterion(
     params: ParameterSet,
     recordings: Sequence[Recording],
-    channel_std: dict[str, float],
+    channel_std: Mapping[str, float] | Sequence[Mapping[str, float]],
     latency_samples: dict[str, int] | None = None,
     initial_states: Sequence[np.ndarray | None] | None = None,
     concentrated: bool = False,
     simulations: Simulations | None = None,
 ) -> float:
     """C(p) of ``params`` on ``recordings`` (module docstring); ``channel_std`` [SI] per
-    output; a channel lagging by ``latency_samples`` d is compared at sample k + d with the
-    model at k; ``initial_states`` per recording (None: at rest). With ``concentrated`` the
-    noise levels are not given but estimated at ``params`` itself, floored at
-    ``channel_std`` (the sensors' std): the concentrated criterion, about sum_j N_j / 2
-    ln(SSR_j / N_j) over channels j (N_j valid samples, SSR_j their sum of squared
-    residuals), which is what a fit that estimates its noise levels minimises, and whose
-    differences are likelihood-ratio statistics as chi^2 / 2 differences are. inf if the
-    simulation fails or leaves the finite numbers. ``simulations``: the fit's free runs
-    (``Simulations``), reused where the same set was simulated from the same states."""
+    output (or one such mapping per recording); a channel lagging by ``latency_samples`` d
+    is compared at sample k + d with the model at k; ``initial_states`` per recording (None:
+    at rest). With ``concentrated`` the noise levels are not given but estimated at
+    ``params`` itself, floored at ``channel_std`` (the sensors' std): the concentrated
+    criterion, about sum_ej N_ej / 2 ln(SSR_ej / N_ej) over recordings e and channels j
+    (N_ej valid samples, SSR_ej their sum of squared residuals), which is what a fit that
+    estimates its noise levels minimises, and whose differences are likelihood-ratio
+    statistics as chi^2 / 2 differences are. inf if the simulation fails or leaves the
+    finite numbers. ``simulations``: the fit's free runs (``Simulations``), reused where the
+    same set was simulated from the same states."""
     starts = [None] * len(recordings) if initial_states is None else initial_states
     if simulations is None:
         predictions = _simulated(params, recordings, starts)
@@ -196,26 +198,22 @@ def held_criterion(
 
 def _criterion(predictions, channel_std, latency_samples, concentrated: bool) -> float:
     """C of (``Dataset``, predicted outputs (N, n_y) [SI]) per recording (module docstring):
-    a channel lagging by d samples is compared at sample k + d with the prediction at k."""
+    a channel lagging by d samples is compared at sample k + d with the prediction at k.
+    ``channel_std``: output name -> std [SI], or one such mapping per recording."""
     latency = latency_samples or {}
-    squares: dict[str, float] = {}
-    counts: dict[str, int] = {}
-    for data, predicted in predictions:
+    total = 0.0
+    for i, (data, predicted) in enumerate(predictions):
+        std = channel_std if isinstance(channel_std, Mapping) else channel_std[i]
         for j, name in enumerate(data.names):
             d = int(latency.get(name, 0))
             n = data.measured.shape[0] - d
             valid = data.valid[d:, j]
             residual = (data.measured[d:, j] - predicted[:n, j])[valid]
-            squares[name] = squares.get(name, 0.0) + float(residual @ residual)
-            counts[name] = counts.get(name, 0) + int(valid.sum())
-    if concentrated:
-        total = sum(
-            _concentrated_term(squares[name], counts[name], channel_std[name])
-            for name in squares
-            if counts[name]
-        )
-    else:
-        total = sum(0.5 * squares[name] / channel_std[name] ** 2 for name in squares)
+            squares, count = float(residual @ residual), int(valid.sum())
+            if not concentrated:
+                total += 0.5 * squares / std[name] ** 2
+            elif count:
+                total += _concentrated_term(squares, count, std[name])
     return total if np.isfinite(total) else math.inf
 
 

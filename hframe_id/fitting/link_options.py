@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -66,6 +66,7 @@ class ProblemOptions:
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     bound_factor: float = 10.0
     channel_std: Mapping[str, float] = field(default_factory=dict)
+    recording_std: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     latency_samples: Mapping[str, int] = field(default_factory=dict)
     smoothing: tuple[float, float] | None = None
     consider: Mapping[str, float] | None = None
@@ -114,7 +115,8 @@ class ProblemOptions:
             raise OptionError(f"bound_factor must be > 1, got {shown(self.bound_factor)}")
 
     def _check_channels(self) -> None:
-        """``channel_std``: output names to noise stds > 0 [rad or m]; ``latency_samples``:
+        """``channel_std``: output names to noise stds > 0 [rad or m]; ``recording_std``:
+        output names to one such std per recording, stored as tuples; ``latency_samples``:
         output names to whole numbers in 0..100 [samples]."""
         if not isinstance(self.channel_std, Mapping):
             raise OptionError(
@@ -122,6 +124,22 @@ class ProblemOptions:
             )
         for name, value in self.channel_std.items():
             positive(f"channel_std[{shown(name)}]", value)
+        if not isinstance(self.recording_std, Mapping):
+            raise OptionError(
+                "recording_std must map output names to one number per recording, "
+                f"got {shown(self.recording_std)}"
+            )
+        per_recording = {}
+        for name, values in self.recording_std.items():
+            if isinstance(values, str) or not isinstance(values, Sequence) or not values:
+                raise OptionError(
+                    f"recording_std[{shown(name)}] must be one number per recording, "
+                    f"got {shown(values)}"
+                )
+            for k, value in enumerate(values):
+                positive(f"recording_std[{shown(name)}][{k}]", value)
+            per_recording[name] = tuple(float(v) for v in values)
+        object.__setattr__(self, "recording_std", per_recording)
         if not isinstance(self.latency_samples, Mapping):
             raise OptionError(
                 "latency_samples must map output names to samples, "

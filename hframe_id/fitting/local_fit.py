@@ -42,7 +42,12 @@ from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.held_uncertainty import include_held_uncertainty
 from hframe_id.fitting.holds import hold_unidentified
-from hframe_id.fitting.noise_rounds import NoiseSettling, estimate_noise, noise_report
+from hframe_id.fitting.noise_rounds import (
+    NoiseSettling,
+    estimate_noise,
+    noise_report,
+    unweighted_residuals,
+)
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.output_error import DEFERRED_STAGE, solve
 from hframe_id.fitting.problem import build_problem
@@ -251,8 +256,7 @@ def _misfit_judged(result: FitResult, ms, state, sensor_std: np.ndarray, estimat
     levels (model mismatch: stated with its evidence in the report, and judged against the
     points the fit knows instead)."""
     used = ms.weight > 0
-    scale = ms.problem.channel_std / sensor_std
-    residual = state.evaluation.residual * scale
+    residual = unweighted_residuals(ms, state.evaluation) / sensor_std
     misfit = float(np.sqrt(np.mean(residual[used] ** 2))) if used.any() else math.nan
     result = result.with_diagnostics(residual_rms_sensor_std=misfit)
     options = result.options

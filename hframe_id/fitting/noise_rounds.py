@@ -1,17 +1,25 @@
-"""Channel noise levels estimated with the fit: maximum likelihood under model error.
+"""Noise levels estimated with the fit: maximum likelihood under model error.
 
 Where the model cannot follow the data (model error 100-1000 x the encoder's step on the
 realistic rig), weighing the channels by their sensors' noise lets the most precise sensor
-decide everything. With unknown channel variances the likelihood, concentrated on them, is
+decide everything. Model error also differs between recordings: a step that drives the
+amplifier into a current limit the model lacks is followed far worse than a small one. With
+an unknown variance per recording e and channel j the likelihood, concentrated on them, is
 
-    L(theta) = sum_j N_j / 2 ln(SSR_j(theta) / N_j),                              (1)
+    L(theta) = sum_e sum_j N_ej / 2 ln(SSR_ej(theta) / N_ej),                     (1)
 
-N_j the valid samples of channel j, SSR_j its residual sum of squares [SI^2]. Its gradient
-is that of the weighted least-squares cost 1/2 sum_j SSR_j / s_j^2 with s_j^2 = SSR_j / N_j
-at the current point, and ln is concave, so that cost, with the weights of the current point,
-majorises (1) up to a constant: a step that lowers it lowers L (majorise-minimise). The
-levels are floored at the sensors' std (a channel fitted below its sensor's noise is
-overfitted, not better known).
+N_ej the valid samples of channel j in recording e, SSR_ej their residual sum of squares
+[SI^2]. Its gradient is that of the weighted least-squares cost 1/2 sum_ej SSR_ej / s_ej^2
+with s_ej^2 = SSR_ej / N_ej at the current point, and ln is concave, so that cost, with the
+weights of the current point, majorises (1) up to a constant: a step that lowers it lowers L
+(majorise-minimise). The levels are floored at the sensors' std (a channel fitted below its
+sensor's noise is overfitted, not better known).
+
+One level per channel pooled over the recordings let the recordings the model cannot follow
+decide the fit: on dev plant 26 of issue 25 (a 7.4 A current limit that the two 6 V steps hit)
+the fit followed those two at the others' expense, and predicted held-out data 4.4 x worse
+than the plant's own reduction; with a level per recording and channel, 0.83 x (2026-11-28,
+docs/studies/).
 
 Each round is a full solve at fixed levels, warm-started from the last; the rounds stop once no
 level at a round's end differs from the levels it was solved at by more than
@@ -45,14 +53,18 @@ REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
 class ChannelNoise:
     """How a fit weighed one output channel, in the channel's SI unit (m or rad):
     ``sensor_std`` the sensor's noise std (the user's ``channel_std`` or the rig's
-    specification), ``weight_std`` the std the fit weighed it with (the sensor's, or a level
-    estimated from the residuals), ``residual_rms`` the fit's residual rms over the valid
-    samples; ``residual_rms_sensor_std`` that rms in sensor std (dimensionless)."""
+    specification), ``weight_std`` the std the fit weighed it with over all recordings (the
+    sensor's, or the levels estimated from the residuals, pooled: the rms of the recordings'
+    levels weighted by their valid samples), ``recording_std`` the std each recording's
+    residuals were divided by, in the order of the recordings (all ``weight_std`` for sensor
+    weights), ``residual_rms`` the fit's residual rms over the valid samples;
+    ``residual_rms_sensor_std`` that rms in sensor std (dimensionless)."""
 
     sensor_std: float
     weight_std: float
     residual_rms: float
     residual_rms_sensor_std: float
+    recording_std: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -81,16 +93,38 @@ class NoiseReport:
         return "estimated" if self.rounds else "sensor"
 
 
+def unweighted_residuals(ms: MultipleShooting, ev: Evaluation) -> np.ndarray:
+    """(W, M, n_y) the residuals of ``ev`` in the channels' SI units (measured - model; 0
+    where a sample is not used): the weighted residuals times each window's
+    recording's std (``FitProblem.recording_std``)."""
+    return ev.residual * ms.problem.recording_std[ms.window_experiment][:, None, :]
+
+
 def channel_rms(ms: MultipleShooting, ev: Evaluation) -> dict[str, float]:
-    """Residual rms of each output channel over its valid samples [SI]."""
-    problem = ms.problem
+    """Residual rms of each output channel over its valid samples of every recording [SI]."""
     used = ms.weight > 0
+    raw = unweighted_residuals(ms, ev)
     rms = {}
-    for j, name in enumerate(problem.output_names):
+    for j, name in enumerate(ms.problem.output_names):
         n = int(np.count_nonzero(used[:, :, j]))
-        weighted = float(np.sum(ev.residual[:, :, j][used[:, :, j]] ** 2))
-        rms[name] = math.sqrt(weighted / n) * float(problem.channel_std[j]) if n else math.nan
+        rms[name] = (
+            math.sqrt(float(np.sum(raw[:, :, j][used[:, :, j]] ** 2)) / n) if n else math.nan
+        )
     return rms
+
+
+def recording_rms(ms: MultipleShooting, ev: Evaluation) -> np.ndarray:
+    """(n_experiments, n_y) residual rms [SI] of each output channel over each recording's
+    valid samples (NaN where a recording has none of a channel)."""
+    used = ms.weight > 0
+    squares = unweighted_residuals(ms, ev) ** 2
+    n_exp = len(ms.problem.experiments)
+    total = np.zeros((n_exp, ms.ny))
+    count = np.zeros((n_exp, ms.ny))
+    np.add.at(total, ms.window_experiment, np.sum(np.where(used, squares, 0.0), axis=1))
+    np.add.at(count, ms.window_experiment, np.sum(used, axis=1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(total / count)
 
 
 def estimate_noise(
@@ -132,14 +166,13 @@ def estimate_noise(
     rounds = first_round - 1
     accepted = None if solver is None else (run, state, solver, rounds)
     for rounds in range(first_round, strategy.max_noise_rounds + 1):
-        std = noise_levels(run.ms, state, sensor_std)
-        change = _change(std, run.problem.channel_std)
+        levels = noise_levels(run.ms, state, sensor_std)
+        change = _change(levels, run.problem.recording_std)
         if rounds > 1 and change <= strategy.noise_rtol and stages[-1].converged:
             rounds -= 1
             break
-        run = _weighted(recordings, run, std)
-        named = zip(run.problem.output_names, std, strict=True)
-        label = f"noise round {rounds} (std {', '.join(f'{k} {v:.3g}' for k, v in named)})"
+        run = _weighted(recordings, run, levels)
+        label = _round_label(rounds, run.problem.output_names, levels)
         state, gn = warm_solve(run, state, label)
         if stages[-1].converged:
             accepted = (run, state, gn, rounds)
@@ -148,31 +181,51 @@ def estimate_noise(
     if not stages[-1].converged and accepted is not None:
         run, state, gn, kept = accepted
         stages.append(_rejected_round_report(stages[-1], kept, run.ms, state))
-    change = _change(noise_levels(run.ms, state, sensor_std), run.problem.channel_std)
+    change = _change(noise_levels(run.ms, state, sensor_std), run.problem.recording_std)
     return run, state, gn, rounds, NoiseSettling(change, change <= strategy.noise_rtol)
 
 
-def _change(std: np.ndarray, weight_std: np.ndarray) -> float:
+def _change(levels: np.ndarray, weight_std: np.ndarray) -> float:
     """The largest relative change (in log) between two sets of levels."""
-    return float(np.max(np.abs(np.log(std / weight_std))))
+    return float(np.max(np.abs(np.log(levels / weight_std))))
 
 
-def _weighted(recordings, run: FitRun, std: np.ndarray) -> FitRun:
-    """``run`` with its problem, transcription and options weighing the channels by ``std``
-    [SI]."""
-    weights = dict(zip(run.problem.output_names, np.asarray(std).tolist(), strict=True))
-    options = replace(run.options, channel_std=weights)
+def _weighted(recordings, run: FitRun, levels: np.ndarray) -> FitRun:
+    """``run`` with its problem, transcription and options weighing each recording's
+    channels by its row of ``levels`` [SI] (``FitOptions.recording_std``), and reporting
+    each channel's level over all recordings (``channel_std``: the rms of the recordings'
+    levels, weighted by their valid samples)."""
+    names = run.problem.output_names
+    counts = np.array([e.valid.sum(axis=0) for e in run.problem.experiments], dtype=float)
+    pooled = np.sqrt(np.sum(counts * levels**2, axis=0) / np.maximum(counts.sum(axis=0), 1.0))
+    options = replace(
+        run.options,
+        channel_std=dict(zip(names, pooled.tolist(), strict=True)),
+        recording_std={name: tuple(levels[:, j].tolist()) for j, name in enumerate(names)},
+    )
     problem = build_problem(recordings, run.problem.initial, options)
     ms = MultipleShooting(problem, transcription=options.transcription_options)
     return replace(run, problem=problem, ms=ms, options=options)
 
 
 def noise_levels(ms, state: SolverState, sensor_std: np.ndarray) -> np.ndarray:
-    """The next round's level per channel [SI]: the residual rms at ``state``, floored at the
-    sensor's std (the weights' std where a channel has no valid residual)."""
-    rms = np.array(list(channel_rms(ms, state.evaluation).values()))
-    weight_std = ms.problem.channel_std
+    """(n_experiments, n_y) the next round's level per recording and channel [SI]: the
+    residual rms at ``state``, floored at the sensor's std (the weights' std where a
+    recording has no valid sample of a channel)."""
+    rms = recording_rms(ms, state.evaluation)
+    weight_std = ms.problem.recording_std
     return np.maximum(np.where(np.isfinite(rms), rms, weight_std), sensor_std)
+
+
+def _round_label(rounds: int, names, levels: np.ndarray) -> str:
+    """A noise round's stage name, with each channel's range of levels over the recordings."""
+
+    def span(column: np.ndarray) -> str:
+        low, high = float(column.min()), float(column.max())
+        return f"{low:.3g}" if math.isclose(low, high, rel_tol=1e-3) else f"{low:.3g}-{high:.3g}"
+
+    shown = ", ".join(f"{name} {span(levels[:, j])}" for j, name in enumerate(names))
+    return f"noise round {rounds} (std {shown})"
 
 
 def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageReport:
@@ -233,6 +286,7 @@ def noise_report(
             name: ChannelNoise(
                 sensor_std=float(sensor_std[j]),
                 weight_std=float(problem.channel_std[j]),
+                recording_std=tuple(float(v) for v in problem.recording_std[:, j]),
                 residual_rms=rms[name],
                 residual_rms_sensor_std=rms[name] / float(sensor_std[j]),
             )

@@ -81,6 +81,10 @@ class FitOptions:
     channel_std : ``{output name: std}`` [SI: the output's unit], the noise each residual is
         divided by. Default: encoder quantization step / sqrt(12) for angles, the rig's laser
         noise std for positions (both from the recording's rig metadata).
+    recording_std : ``{output name: (std, ...)}`` [SI], one std per recording, in the order
+        of the recordings: that output's residuals of each recording are divided by its own
+        std (instead of ``channel_std``). What a fit that estimates its noise levels weighs
+        with (``noise_rounds``): model error differs between recordings.
     latency_samples : ``{output name: samples}``, whole samples a sensor lags the plant
         (the laser's read-out latency, from its data sheet): the channel's sample k + d is
         compared with the model at sample k. Latency is not estimated: in steady motion a
@@ -209,6 +213,7 @@ class FitOptions:
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     bound_factor: float = ProblemOptions.bound_factor
     channel_std: Mapping[str, float] = field(default_factory=dict)
+    recording_std: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     solver: str = SolverOptions.solver
     noise: str = "auto"
     latency_samples: Mapping[str, int] = field(default_factory=dict)
@@ -373,6 +378,7 @@ class FitOptions:
             "bounds": {k: [float(a), float(b)] for k, (a, b) in self.bounds.items()},
             "bound_factor": float(self.bound_factor),
             "channel_std": {k: float(v) for k, v in self.channel_std.items()},
+            "recording_std": {k: [float(x) for x in v] for k, v in self.recording_std.items()},
             "solver": self.solver,
             "noise": self.noise,
             "latency_samples": {k: int(v) for k, v in self.latency_samples.items()},

@@ -57,6 +57,9 @@ class FitProblem:
     box_upper: np.ndarray
     experiments: tuple[Dataset, ...]
     channel_std: np.ndarray  # (n_y,) [SI]
+    #: (n_experiments, n_y) [SI] the std each experiment's residuals are divided by: its own
+    #: level where ``ProblemOptions.recording_std`` gives one, else ``channel_std``
+    recording_std: np.ndarray
     quantization: np.ndarray  # (n_y,) encoder step [rad] of quantized channels, else 0
     sample_period_s: float
     smoothing: tuple[float, float]
@@ -254,6 +257,15 @@ def build_problem(
         ]
     )
     experiments = tuple(_with_initial_state(e, first.noise_std, wanted) for e in experiments)
+    recording_std = np.array(
+        [
+            [
+                wanted.recording_std[name][e] if name in wanted.recording_std else std[j]
+                for j, name in enumerate(first.names)
+            ]
+            for e in range(len(experiments))
+        ]
+    )
     # Only an angle the output is (not a speed or a current named phi...) is an encoder's.
     quantization = np.array(
         [
@@ -271,6 +283,7 @@ def build_problem(
         **spaces,
         experiments=experiments,
         channel_std=std,
+        recording_std=recording_std,
         quantization=quantization,
         sample_period_s=float(recordings[0].sample_period_s),
         smoothing=(float(smoothing[0]), float(smoothing[1])),
@@ -403,17 +416,17 @@ def _experiments(
     ``latency_samples`` naming no output, a record not longer than a ``shooting_interval``
     [samples], or an output with no valid sample."""
     outputs = [s.name for s in model.outputs]
-    for name in wanted.channel_std:
-        if name not in outputs:
+    for option in ("channel_std", "recording_std", "latency_samples"):
+        for name in getattr(wanted, option):
+            if name not in outputs:
+                raise FitError(
+                    f"{option}: unknown output {name!r}{_suggest(name, outputs)}; "
+                    f"valid: {', '.join(outputs)}"
+                )
+    for name, values in wanted.recording_std.items():
+        if len(values) != len(recordings):
             raise FitError(
-                f"channel_std: unknown output {name!r}{_suggest(name, outputs)}; "
-                f"valid: {', '.join(outputs)}"
-            )
-    for name in wanted.latency_samples:
-        if name not in outputs:
-            raise FitError(
-                f"latency_samples: unknown output {name!r}{_suggest(name, outputs)}; "
-                f"valid: {', '.join(outputs)}"
+                f"recording_std[{name!r}]: {len(values)} values for {len(recordings)} recordings"
             )
     latency = dict(wanted.latency_samples)
     experiments = tuple(Dataset.from_recording(model, rec).delayed(latency) for rec in recordings)

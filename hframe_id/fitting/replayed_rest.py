@@ -96,8 +96,9 @@ def solve_from_replayed_rest(run: FitRun, best: Fitted, recordings) -> tuple[Fit
 
 def _replay_criterion(problem, recordings):
     """theta -> chi^2 / 2 of ``recordings`` simulated from rest at ``problem``'s parameters
-    ``theta``, under the problem's channel weights and latencies (``validate``'s replay)."""
-    std = dict(zip(problem.output_names, problem.channel_std, strict=True))
+    ``theta``, under the problem's weights (each recording's) and latencies (``validate``'s
+    replay)."""
+    std = [dict(zip(problem.output_names, row, strict=True)) for row in problem.recording_std]
     latency = dict(problem.problem_options.latency_samples)
 
     def criterion(theta: np.ndarray) -> float:

@@ -216,6 +216,28 @@ def mismatch_rows(result: FitResult) -> list[tuple[str, ...]]:
     return rows
 
 
+def recording_level_rows(result: FitResult) -> list[tuple[str, ...]]:
+    """Header and one row per recording: the noise std the fit weighed each channel of that
+    recording with (display units), or no rows if every recording was weighed alike."""
+    channels = result.diagnostics.noise.channels
+    if all(len(set(c.recording_std)) <= 1 for c in channels.values()):
+        return []
+    units = output_units(result.variant)
+    shown = {name: shown_in(units[name]) for name in channels}
+    rows = [("recording", *(f"{name} std" for name in channels))]
+    for k, recording in enumerate(result.experiment_names):
+        rows.append(
+            (
+                recording,
+                *(
+                    f"{shown[name][0] * c.recording_std[k]:.3g} {shown[name][1]}"
+                    for name, c in channels.items()
+                ),
+            )
+        )
+    return rows
+
+
 def simulated_outputs(
     sets: list[ParameterSet | None], rec: Recording, x0: np.ndarray
 ) -> list[np.ndarray | None]:
@@ -333,6 +355,15 @@ def _report_lines(
     if statement:
         lines += ["## Model mismatch", "", statement, "", *markdown_table(mismatch_rows(result))]
         lines.append("")
+        per_recording = recording_level_rows(result)
+        if per_recording:
+            lines += [
+                "Each recording's residuals were weighed by their own noise level (model "
+                "error differs between recordings):",
+                "",
+                *markdown_table(per_recording),
+                "",
+            ]
     intro = f"Fitted values against the model's reference set ({label})"
     if truth:
         intro += f" {truth_note}"

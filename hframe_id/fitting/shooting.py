@@ -147,7 +147,7 @@ class MultipleShooting(ShootingNodes):
             self.inputs[i, n:] = exp.inputs[k0 + n - 1]
             valid = exp.valid[k0 : k0 + n]
             self.measured[i, :n] = np.where(valid, exp.measured[k0 : k0 + n], 0.0)
-            self.weight[i, :n] = valid / problem.channel_std
+            self.weight[i, :n] = valid / problem.recording_std[exp_of[i]]
         # Windows i and i + 1 of the same experiment are joined by continuity (unless the
         # options ask for independent horizons: ``FitOptions.continuity``).
         self.linked = (self.window_experiment[:-1] == self.window_experiment[1:]) & (

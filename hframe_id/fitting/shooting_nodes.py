@@ -48,7 +48,7 @@ class ShootingNodes:
         self.measured_usable: list[np.ndarray] = []
         for e, exp in enumerate(self.problem.experiments):
             n = exp.n_samples
-            weights = exp.valid / self.problem.channel_std * position
+            weights = exp.valid / self.problem.recording_std[e] * position
             y = np.where(exp.valid, exp.measured, 0.0)
             rigid = self._rigid_fit(cq @ modes, modes, y, weights)
             positions = rigid.copy()

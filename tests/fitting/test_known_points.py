@@ -13,29 +13,44 @@ def test_the_models_reference_files_are_known_points():
 
 
 def _squares_and_counts(params, recordings):
-    """Per channel: the free run's sum of squared residuals [SI^2] and valid samples."""
+    """Per recording, per channel: the free run's sum of squared residuals [SI^2] and valid
+    samples."""
     from hframe_id.validation.replay import simulate_channels
 
-    squares, counts = {}, {}
+    squares, counts = [], []
     for rec in recordings:
         data, simulated = simulate_channels(params, rec)
+        squares.append({}), counts.append({})
         for j, name in enumerate(data.names):
             r = (data.measured[:, j] - simulated[:, j])[data.valid[:, j]]
-            squares[name] = squares.get(name, 0.0) + float(r @ r)
-            counts[name] = counts.get(name, 0) + r.size
+            squares[-1][name], counts[-1][name] = float(r @ r), r.size
     return squares, counts
 
 
 def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
-    """sum_j N_j / 2 ln(SSR_j / N_j): the chi^2 / 2 criterion at the noise levels that are
-    each point's own maximum-likelihood ones, less a constant (floors far below them)."""
+    """sum_ej N_ej / 2 ln(SSR_ej / N_ej): the chi^2 / 2 criterion at the noise levels, one
+    per recording and channel, that are each point's own maximum-likelihood ones, less a
+    constant (floors far below them)."""
     squares, counts = _squares_and_counts(table, steps)
-    floors = dict.fromkeys(squares, 1e-12)
+    floors = dict.fromkeys(squares[0], 1e-12)
     concentrated = simulation_criterion(table, steps, floors, concentrated=True)
-    own_levels = {n: np.sqrt(squares[n] / counts[n]) for n in squares}
+    own_levels = [
+        {n: np.sqrt(sq[n] / c[n]) for n in sq} for sq, c in zip(squares, counts, strict=True)
+    ]
     at_own_levels = simulation_criterion(table, steps, own_levels)
-    constant = sum(0.5 * counts[n] * (np.log(own_levels[n] ** 2) - 1.0) for n in squares)
+    constant = sum(
+        0.5 * c[n] * (np.log(level[n] ** 2) - 1.0)
+        for level, c in zip(own_levels, counts, strict=True)
+        for n in c
+    )
     assert concentrated == pytest.approx(at_own_levels + constant, rel=1e-12)
+    # One level per channel pooled over the recordings is a constraint on the levels: the
+    # concentrated criterion (their best) is lower than chi^2 / 2 at the pooled ones + const.
+    pooled = {n: np.sqrt(sum(sq[n] for sq in squares) / sum(c[n] for c in counts)) for n in floors}
+    constant_pooled = sum(
+        0.5 * sum(c[n] for c in counts) * (np.log(pooled[n] ** 2) - 1.0) for n in floors
+    )
+    assert concentrated < simulation_criterion(table, steps, pooled) + constant_pooled
     # The truth simulates these records better on every channel: lower either way.
     assert simulation_criterion(truth, steps, floors, concentrated=True) < concentrated
 
@@ -47,12 +62,15 @@ def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, step
     import math
 
     squares, counts = _squares_and_counts(truth, steps)
-    floors = {n: 10 * math.sqrt(squares[n] / counts[n]) for n in squares}  # all floored
+    # Floors above every recording's own level: all floored.
+    floors = {
+        n: 10 * max(math.sqrt(sq[n] / c[n]) for sq, c in zip(squares, counts, strict=True))
+        for n in squares[0]
+    }
     expected = sum(
-        0.5 * counts[n] * math.log(floors[n] ** 2)
-        + 0.5 * squares[n] / floors[n] ** 2
-        - 0.5 * counts[n]
-        for n in squares
+        0.5 * c[n] * math.log(floors[n] ** 2) + 0.5 * sq[n] / floors[n] ** 2 - 0.5 * c[n]
+        for sq, c in zip(squares, counts, strict=True)
+        for n in sq
     )
     floored = simulation_criterion(truth, steps, floors, concentrated=True)
     assert floored == pytest.approx(expected, rel=1e-12)

@@ -24,14 +24,16 @@ MODELS = Path(__file__).resolve().parents[2] / "models"
 
 
 def _judged(result, estimated=False):
-    """``result`` judged on residuals of 3 (the problem's noise units) in every used sample
-    and 100 in an unused one, the problem's noise levels twice the sensors': the residual
-    rms in sensor std is 3 x 2 = 6."""
+    """``result`` judged on two windows of two recordings weighed at twice and four times the
+    sensors' noise, with residuals of 3 and 1.5 (in those units) in every used sample and 100
+    in an unused one: the residual rms in sensor std is 3 x 2 = 1.5 x 4 = 6."""
     residual = np.full((2, 3, 2), 3.0)
+    residual[1] = 1.5
     residual[1, 2, 0] = 100.0
     weight = np.ones_like(residual)
     weight[1, 2, 0] = 0.0
-    ms = SimpleNamespace(weight=weight, problem=SimpleNamespace(channel_std=np.array([2.0, 2.0])))
+    problem = SimpleNamespace(recording_std=np.array([[2.0, 2.0], [4.0, 4.0]]))
+    ms = SimpleNamespace(weight=weight, problem=problem, window_experiment=np.array([0, 1]))
     state = SimpleNamespace(evaluation=SimpleNamespace(residual=residual))
     return local_fit._misfit_judged(result, ms, state, np.array([1.0, 1.0]), estimated)
 

@@ -1,5 +1,6 @@
 """The noise levels' reading of the residuals (``fitting.noise_rounds``), on hand-made
-residuals: the rms of each channel in SI units, floored at its sensor's std."""
+residuals: the rms of each channel in SI units, over all recordings and per recording,
+floored at its sensor's std."""
 
 from __future__ import annotations
 
@@ -10,45 +11,76 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting import noise_rounds
-from hframe_id.fitting.noise_rounds import channel_rms, noise_levels
+from hframe_id.fitting.noise_rounds import channel_rms, noise_levels, recording_rms
 from hframe_id.fitting.strategy_settings import StrategySettings
 
-STD = np.array([0.01, 0.001])  # the levels the transcription weighs with [SI]
+#: The levels the transcription weighs each recording's channels with [SI]: two recordings
+#: of two windows each (windows 0, 1 and 2, 3).
+STD = np.array([[0.01, 0.001], [0.02, 0.004]])
+WINDOW_RECORDING = np.array([0, 0, 1, 1])
 SENSOR = np.array([0.001, 0.0005])  # the sensors' std [SI]
 
 
 def _fit(errors: np.ndarray, valid: np.ndarray):
-    """A transcription (weights valid / std) and a state whose residuals are ``errors``."""
+    """A transcription (weights valid / its recording's std) and a state whose residuals are
+    ``errors`` [SI] (4 windows of 5 samples, channels phi1 and x)."""
+    problem = SimpleNamespace(
+        output_names=("phi1", "x"), recording_std=STD, experiments=(None, None)
+    )
     ms = SimpleNamespace(
-        weight=valid / STD,
-        problem=SimpleNamespace(output_names=("phi1", "x"), channel_std=STD),
+        weight=valid / STD[WINDOW_RECORDING][:, None, :],
+        problem=problem,
+        window_experiment=WINDOW_RECORDING,
+        ny=2,
     )
     state = SimpleNamespace(evaluation=SimpleNamespace(residual=errors * ms.weight))
     return ms, state
 
 
-def test_channel_rms_is_in_si_units_over_the_valid_samples():
+def _errors(per_recording: list[tuple[float, float]]) -> np.ndarray:
+    """(4, 5, 2) errors [SI]: each recording's (phi1, x) error in every sample."""
+    rows = [per_recording[r] for r in WINDOW_RECORDING]
+    return np.array([[row] * 5 for row in rows])
+
+
+def test_channel_rms_is_in_si_units_over_the_valid_samples_of_every_recording():
     valid = np.ones((4, 5, 2))
     valid[0, :, 1] = 0.0  # invalid samples count for nothing, whatever their error
-    errors = np.stack([np.full((4, 5), 0.02), np.full((4, 5), 3e-3)], axis=-1)
+    errors = _errors([(0.02, 3e-3), (0.02, 3e-3)])
     errors[0, :, 1] = 1.0
     ms, state = _fit(errors, valid)
     assert channel_rms(ms, state.evaluation) == pytest.approx({"phi1": 0.02, "x": 3e-3})
+    # Pooled: the rms over all valid samples, whatever each recording was weighed with.
+    ms, state = _fit(_errors([(0.01, 3e-3), (0.03, 3e-3)]), np.ones((4, 5, 2)))
+    assert channel_rms(ms, state.evaluation)["phi1"] == pytest.approx(math.sqrt(5e-4))
 
 
-def test_the_next_levels_are_the_rms_floored_at_the_sensors():
-    """phi1's errors of 0.02 give 0.02; x's of 1e-4, below its sensor's 5e-4, give 5e-4."""
+def test_recording_rms_is_each_recordings_own():
     valid = np.ones((4, 5, 2))
-    errors = np.stack([np.full((4, 5), 0.02), np.full((4, 5), 1e-4)], axis=-1)
+    valid[3, :, 1] = 0.0
+    errors = _errors([(0.01, 1e-3), (0.03, 2e-3)])
+    errors[3, :, 1] = 1.0  # not valid
     ms, state = _fit(errors, valid)
-    assert noise_levels(ms, state, SENSOR) == pytest.approx([0.02, 5e-4], rel=1e-12)
+    assert recording_rms(ms, state.evaluation) == pytest.approx(
+        np.array([[0.01, 1e-3], [0.03, 2e-3]])
+    )
 
 
-def test_a_channel_without_valid_samples_keeps_its_level():
+def test_the_next_levels_are_each_recordings_rms_floored_at_the_sensors():
+    """phi1's errors of 0.02 and 0.04 give those; x's of 1e-4, below its sensor's 5e-4, give
+    5e-4 in the first recording, and 2e-3 its own in the second."""
+    errors = _errors([(0.02, 1e-4), (0.04, 2e-3)])
+    ms, state = _fit(errors, np.ones((4, 5, 2)))
+    assert noise_levels(ms, state, SENSOR) == pytest.approx(np.array([[0.02, 5e-4], [0.04, 2e-3]]))
+
+
+def test_a_recording_without_valid_samples_of_a_channel_keeps_its_level():
     valid = np.ones((4, 5, 2))
-    valid[..., 1] = 0.0
-    ms, state = _fit(np.full((4, 5, 2), 0.02), valid)
-    assert noise_levels(ms, state, SENSOR) == pytest.approx([0.02, STD[1]], rel=1e-12)
+    valid[2:, :, 1] = 0.0
+    ms, state = _fit(_errors([(0.02, 3e-3), (0.02, 3e-3)]), valid)
+    assert noise_levels(ms, state, SENSOR) == pytest.approx(
+        np.array([[0.02, 3e-3], [0.02, STD[1, 1]]])
+    )
 
 
 def test_the_rounds_end_at_a_round_that_ends_against_the_stiffness_wall(monkeypatch):
@@ -62,25 +94,27 @@ def test_the_rounds_end_at_a_round_that_ends_against_the_stiffness_wall(monkeypa
         run = SimpleNamespace(
             options=SimpleNamespace(strategy=strategy),
             stages=stages,
-            problem=SimpleNamespace(free=("J_M1",), output_names=("phi1",), channel_std=STD[:1]),
+            problem=SimpleNamespace(
+                free=("J_M1",), output_names=("phi1",), recording_std=STD[:1, :1]
+            ),
             ms=None,
             against_the_wall=lambda theta: ("J_M1",) if theta[0] >= wall_at else (),
         )
         levels = iter(0.5**k for k in range(100))
 
-        def weighted(recordings, run, std):
-            run.problem.channel_std = std
+        def weighted(recordings, run, levels):
+            run.problem.recording_std = levels
             return run
 
         def solve(run, state, label):
             stages.append(SimpleNamespace(converged=True))
             return SimpleNamespace(theta=state.theta + 1.0), "solver"
 
-        monkeypatch.setattr(noise_rounds, "noise_levels", lambda *args: np.array([next(levels)]))
+        monkeypatch.setattr(noise_rounds, "noise_levels", lambda *args: np.array([[next(levels)]]))
         monkeypatch.setattr(noise_rounds, "_weighted", weighted)
         monkeypatch.setattr(noise_rounds, "warm_solve", solve)
         start = SimpleNamespace(theta=np.zeros(1))
-        return noise_rounds.estimate_noise(run, start, [], STD[:1])
+        return noise_rounds.estimate_noise(run, start, [], SENSOR[:1])
 
     _, state, _, rounds, settling = fit(wall_at=2.0)
     assert (rounds, state.theta[0], settling.settled) == (2, 2.0, False)

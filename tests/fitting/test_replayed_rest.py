@@ -49,13 +49,15 @@ def test_the_replay_is_judged_at_the_fits_weights_and_latencies(monkeypatch):
     monkeypatch.setattr(replayed_rest, "simulation_criterion", criterion)
     problem = SimpleNamespace(
         output_names=("phi1", "x"),
-        channel_std=np.array([2e-5, 1e-5]),  # the fit's, e.g. estimated noise levels
+        # the fit's, e.g. noise levels estimated per recording
+        recording_std=np.array([[2e-5, 1e-5], [3e-5, 4e-5]]),
         problem_options=ProblemOptions(latency_samples={"x": 2}),
         parameter_set=lambda theta: f"parameters at {theta.tolist()}",
     )
-    judge = replayed_rest._replay_criterion(problem, ["recording"])
+    judge = replayed_rest._replay_criterion(problem, ["first", "second"])
     assert judge(np.array([0.5])) == 12.5
-    assert seen == [("parameters at [0.5]", ["recording"], {"phi1": 2e-5, "x": 1e-5}, {"x": 2})]
+    levels = [{"phi1": 2e-5, "x": 1e-5}, {"phi1": 3e-5, "x": 4e-5}]
+    assert seen == [("parameters at [0.5]", ["first", "second"], levels, {"x": 2})]
 
 
 class _Shooting:
