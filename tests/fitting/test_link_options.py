@@ -37,6 +37,10 @@ BAD_LINK_FIELDS = [
     (ProblemOptions, "bound_factor", "10", "bound_factor must be a number, got '10'"),
     (ProblemOptions, "channel_std", 0.1, "channel_std must map output names to numbers"),
     (ProblemOptions, "channel_std", {"phi1": -1.0}, "channel_std['phi1'] must be > 0, got -1.0"),
+    (ProblemOptions, "recording_std", 0.1, "recording_std must map output names to one number"),
+    (ProblemOptions, "recording_std", {"x": 0.1}, "recording_std['x'] must be one number per"),
+    (ProblemOptions, "recording_std", {"x": ()}, "recording_std['x'] must be one number per"),
+    (ProblemOptions, "recording_std", {"x": (1.0, 0.0)}, "recording_std['x'][1] must be > 0"),
     (ProblemOptions, "latency_samples", 2, "latency_samples must map output names to samples"),
     (
         ProblemOptions,

@@ -130,6 +130,32 @@ def test_weights_default_to_the_sensor_noise(table, recording):
     assert problem.quantization[:2] == pytest.approx([step, step], rel=1e-12)
 
 
+def test_each_recording_is_weighed_by_its_own_levels_where_given(table, recording):
+    """``recording_std`` gives x one level per recording; phi1, phi2 and y keep the sensors'
+    (or ``channel_std``); the transcription divides each window's residuals by its own."""
+    from hframe_id.fitting.shooting import MultipleShooting
+
+    options = FitOptions(channel_std={"y": 1e-4}, recording_std={"x": (1e-3, 4e-3)})
+    problem = build_problem([recording, recording], table, options)
+    sensors = build_problem([recording], table, FitOptions()).channel_std
+    expected = np.tile([sensors[0], sensors[1], 0.0, 1e-4], (2, 1))
+    expected[:, 2] = (1e-3, 4e-3)
+    assert problem.recording_std == pytest.approx(expected, rel=1e-12)
+    ms = MultipleShooting(
+        problem, transcription=options.for_model("hframe-8").transcription_options
+    )
+    second = ms.window_experiment == 1
+    assert np.all(ms.weight[second][..., 2][ms.weight[second][..., 2] > 0] == 1 / 4e-3)
+    assert np.all(ms.weight[~second][..., 2][ms.weight[~second][..., 2] > 0] == 1 / 1e-3)
+
+
+def test_recording_levels_must_match_the_recordings(table, recording):
+    with pytest.raises(FitError, match=r"recording_std\['x'\]: 3 values for 2 recordings"):
+        build_problem([recording, recording], table, FitOptions(recording_std={"x": (1, 2, 3)}))
+    with pytest.raises(FitError, match="recording_std: unknown output 'z'"):
+        build_problem([recording], table, FitOptions(recording_std={"z": (1.0,)}))
+
+
 def test_theta_of_a_linear_parameter_starting_at_zero_warns_nothing(table, recording):
     """F_c_cart fitted linearly from 0 and at 0 (a reference file with it at 0): theta_of
     computes 0 / 0 for the unused log."""

@@ -77,6 +77,34 @@ def test_parameter_file_provenance_carries_the_noise_levels_with_units(mismatche
     assert "residual_rms [m]" in levels["channels"]["x"]
 
 
+def test_levels_that_differ_between_recordings_are_reported_per_recording(mismatched):
+    """Two recordings weighed at their own levels (phi1 0.01 and 0.3 rad): a table of them in
+    the report, and per channel a mapping recording -> level in the parameter file; one
+    recording (the fit itself) has neither."""
+    from hframe_id.fitting.report import recording_level_rows
+
+    result, _ = mismatched
+    assert recording_level_rows(result) == []
+    assert not any(
+        "by_recording" in k for c in noise_levels(result)["channels"].values() for k in c
+    )
+    channels = {
+        name: dataclasses.replace(c, recording_std=(0.01, 0.3) if name == "phi1" else (1e-3,) * 2)
+        for name, c in result.diagnostics.noise.channels.items()
+    }
+    noise = dataclasses.replace(result.diagnostics.noise, channels=channels)
+    two = dataclasses.replace(
+        result.with_diagnostics(noise=noise), experiment_names=("2V_x.mcap", "6V_x.mcap")
+    )
+    rows = recording_level_rows(two)
+    assert rows[0] == ("recording", "phi1 std", "phi2 std", "x std", "y std")
+    assert rows[2][:2] == ("6V_x.mcap", "0.3 rad") and rows[2][3] == "1 mm"
+    assert noise_levels(two)["channels"]["phi1"]["weight_std_by_recording [rad]"] == {
+        "2V_x.mcap": 0.01,
+        "6V_x.mcap": 0.3,
+    }
+
+
 @pytest.mark.parametrize("settled", [True, False])
 def test_unsettled_noise_levels_are_stated(mismatched, settled):
     """Noise levels still moving when the rounds ended (by 16 %: realistic plant 1 of the
