@@ -201,57 +201,20 @@ def _criterion(predictions, channel_std, latency_samples, concentrated: bool) ->
     a channel lagging by d samples is compared at sample k + d with the prediction at k.
     ``channel_std``: output name -> std [SI], or one such mapping per recording."""
     latency = latency_samples or {}
-    names = predictions[0][0].names if predictions else ()
-    squares = np.zeros((len(predictions), len(names)))
-    counts = np.zeros_like(squares)
+    total = 0.0
     for i, (data, predicted) in enumerate(predictions):
-        for j, name in enumerate(names):
+        std = channel_std if isinstance(channel_std, Mapping) else channel_std[i]
+        for j, name in enumerate(data.names):
             d = int(latency.get(name, 0))
             n = data.measured.shape[0] - d
             valid = data.valid[d:, j]
             residual = (data.measured[d:, j] - predicted[:n, j])[valid]
-            squares[i, j], counts[i, j] = float(residual @ residual), int(valid.sum())
-    if concentrated:
-        given = channel_std if isinstance(channel_std, Mapping) else channel_std[0]
-        sensor = np.array([given[name] for name in names])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            floors = level_floors(np.sqrt(squares / counts), sensor)
-        total = sum(
-            _concentrated_term(squares[i, j], int(counts[i, j]), floors[j])
-            for i in range(len(predictions))
-            for j in range(len(names))
-            if counts[i, j]
-        )
-    else:
-        std = [
-            channel_std if isinstance(channel_std, Mapping) else channel_std[i]
-            for i in range(len(predictions))
-        ]
-        total = sum(
-            0.5 * squares[i, j] / std[i][name] ** 2
-            for i in range(len(predictions))
-            for j, name in enumerate(names)
-        )
+            squares, count = float(residual @ residual), int(valid.sum())
+            if not concentrated:
+                total += 0.5 * squares / std[name] ** 2
+            elif count:
+                total += _concentrated_term(squares, count, std[name])
     return total if np.isfinite(total) else math.inf
-
-
-def level_floors(rms: np.ndarray, sensor_std: np.ndarray) -> np.ndarray:
-    """(n_y,) the lowest noise level [SI] a recording's channel may be weighed with, given
-    each recording's residual rms ``rms`` (n_recordings, n_y) [SI] (NaN: no valid sample):
-    the larger of the sensor's std ``sensor_std`` and the median of the recordings' rms. A
-    recording may count as noisier than the typical one (model error the others do not show:
-    a step into a current limit), never as more precise: a record in which a stuck plant
-    does not move is followed to the sensor's noise by any point that keeps it still, and
-    floored at the sensor's std alone it outweighed the records that move (test plant 1168,
-    Coulomb friction 2.7 x: "nothing moves" judged better than the plant's own reduction)."""
-    finite = np.isfinite(rms)
-    typical = np.array(
-        [
-            np.median(rms[finite[:, j], j]) if finite[:, j].any() else 0.0
-            for j in range(rms.shape[1])
-        ]
-    )
-    return np.maximum(typical, sensor_std)
 
 
 def _concentrated_term(squares: float, count: int, floor_std: float) -> float:

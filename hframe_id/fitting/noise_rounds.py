@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hframe_id.fitting.known_points import level_floors
 from hframe_id.fitting.problem import FitProblem, build_problem
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
@@ -211,13 +210,11 @@ def _weighted(recordings, run: FitRun, levels: np.ndarray) -> FitRun:
 
 def noise_levels(ms, state: SolverState, sensor_std: np.ndarray) -> np.ndarray:
     """(n_experiments, n_y) the next round's level per recording and channel [SI]: the
-    residual rms at ``state``, floored at the larger of the sensor's std and the median of
-    the recordings' rms (``known_points.level_floors``: no recording counts as more precise
-    than the typical one); the weights' std where a recording has no valid sample of a
-    channel."""
+    residual rms at ``state``, floored at the sensor's std (the weights' std where a
+    recording has no valid sample of a channel)."""
     rms = recording_rms(ms, state.evaluation)
-    floors = level_floors(rms, sensor_std)
-    return np.maximum(np.where(np.isfinite(rms), rms, ms.problem.recording_std), floors)
+    weight_std = ms.problem.recording_std
+    return np.maximum(np.where(np.isfinite(rms), rms, weight_std), sensor_std)
 
 
 def _round_label(rounds: int, names, levels: np.ndarray) -> str:

@@ -28,17 +28,15 @@ def _squares_and_counts(params, recordings):
 
 
 def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table, truth, steps):
-    """sum_ej N_ej / 2 ln(s_ej^2) + SSR_ej / (2 s_ej^2) - N_ej / 2: the chi^2 / 2 criterion
-    at noise levels s_ej, one per recording and channel, that are each point's own: its rms,
-    floored at the median of the recordings' rms (sensor floors far below them), less a
-    constant."""
+    """sum_ej N_ej / 2 ln(SSR_ej / N_ej): the chi^2 / 2 criterion at the noise levels, one
+    per recording and channel, that are each point's own maximum-likelihood ones, less a
+    constant (floors far below them)."""
     squares, counts = _squares_and_counts(table, steps)
     floors = dict.fromkeys(squares[0], 1e-12)
     concentrated = simulation_criterion(table, steps, floors, concentrated=True)
-    rms = [{n: np.sqrt(sq[n] / c[n]) for n in sq} for sq, c in zip(squares, counts, strict=True)]
-    median = {n: np.median([r[n] for r in rms]) for n in floors}
-    own_levels = [{n: max(r[n], median[n]) for n in r} for r in rms]
-    assert any(level[n] > r[n] for level, r in zip(own_levels, rms, strict=True) for n in r)
+    own_levels = [
+        {n: np.sqrt(sq[n] / c[n]) for n in sq} for sq, c in zip(squares, counts, strict=True)
+    ]
     at_own_levels = simulation_criterion(table, steps, own_levels)
     constant = sum(
         0.5 * c[n] * (np.log(level[n] ** 2) - 1.0)
@@ -46,18 +44,15 @@ def test_the_concentrated_criterion_gives_each_point_its_own_noise_levels(table,
         for n in c
     )
     assert concentrated == pytest.approx(at_own_levels + constant, rel=1e-12)
-    # The truth simulates these records better on every channel: lower.
+    # One level per channel pooled over the recordings is a constraint on the levels: the
+    # concentrated criterion (their best) is lower than chi^2 / 2 at the pooled ones + const.
+    pooled = {n: np.sqrt(sum(sq[n] for sq in squares) / sum(c[n] for c in counts)) for n in floors}
+    constant_pooled = sum(
+        0.5 * sum(c[n] for c in counts) * (np.log(pooled[n] ** 2) - 1.0) for n in floors
+    )
+    assert concentrated < simulation_criterion(table, steps, pooled) + constant_pooled
+    # The truth simulates these records better on every channel: lower either way.
     assert simulation_criterion(truth, steps, floors, concentrated=True) < concentrated
-
-
-def test_no_recording_counts_as_more_precise_than_the_typical_one():
-    """Floors: the median of the recordings' rms per channel, or the sensor's std if larger;
-    a channel no recording has (NaN) keeps the sensor's."""
-    from hframe_id.fitting.known_points import level_floors
-
-    rms = np.array([[1e-6, 0.02, np.nan], [0.01, 0.03, np.nan], [0.5, 1e-3, np.nan]])
-    sensor = np.array([1e-5, 0.05, 1e-4])
-    assert level_floors(rms, sensor) == pytest.approx([0.01, 0.05, 1e-4])
 
 
 def test_the_concentrated_criterion_floors_the_levels_at_the_sensors(truth, steps):

@@ -66,13 +66,12 @@ def test_recording_rms_is_each_recordings_own():
     )
 
 
-def test_the_next_levels_are_each_recordings_rms_floored_at_the_typical_and_the_sensor():
-    """phi1's errors of 0.02 and 0.04: the first floored at their median 0.03 (no recording
-    more precise than the typical one), the second its own; x's of 1e-4 and 2e-4, below its
-    sensor's 5e-4, give 5e-4 in both."""
-    errors = _errors([(0.02, 1e-4), (0.04, 2e-4)])
+def test_the_next_levels_are_each_recordings_rms_floored_at_the_sensors():
+    """phi1's errors of 0.02 and 0.04 give those; x's of 1e-4, below its sensor's 5e-4, give
+    5e-4 in the first recording, and 2e-3 its own in the second."""
+    errors = _errors([(0.02, 1e-4), (0.04, 2e-3)])
     ms, state = _fit(errors, np.ones((4, 5, 2)))
-    assert noise_levels(ms, state, SENSOR) == pytest.approx(np.array([[0.03, 5e-4], [0.04, 5e-4]]))
+    assert noise_levels(ms, state, SENSOR) == pytest.approx(np.array([[0.02, 5e-4], [0.04, 2e-3]]))
 
 
 def test_a_recording_without_valid_samples_of_a_channel_keeps_its_level():
