@@ -66,6 +66,11 @@ class ChannelNoise:
     residual_rms_sensor_std: float
     recording_std: tuple[float, ...] = ()
 
+    @property
+    def differs_by_recording(self) -> bool:
+        """Whether the recordings were weighed with levels of their own (not all alike)."""
+        return len(set(self.recording_std)) > 1
+
 
 @dataclass(frozen=True)
 class NoiseSettling:

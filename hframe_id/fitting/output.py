@@ -154,7 +154,7 @@ def noise_levels(result: FitResult) -> dict[str, Any]:
             f"residual_rms [{unit}]": _number(channel.residual_rms),
             "residual_rms [sensor std]": _number(channel.residual_rms_sensor_std),
         }
-        if len(set(channel.recording_std)) > 1:
+        if channel.differs_by_recording:
             channels[name][f"weight_std_by_recording [{unit}]"] = {
                 recording: _number(level)
                 for recording, level in zip(

@@ -220,7 +220,7 @@ def recording_level_rows(result: FitResult) -> list[tuple[str, ...]]:
     """Header and one row per recording: the noise std the fit weighed each channel of that
     recording with (display units), or no rows if every recording was weighed alike."""
     channels = result.diagnostics.noise.channels
-    if all(len(set(c.recording_std)) <= 1 for c in channels.values()):
+    if not any(c.differs_by_recording for c in channels.values()):
         return []
     units = output_units(result.variant)
     shown = {name: shown_in(units[name]) for name in channels}
