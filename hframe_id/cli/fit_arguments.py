@@ -74,7 +74,8 @@ def _add_parameter_options(parser: argparse.ArgumentParser) -> None:
         "--free",
         metavar="NAMES",
         help="comma-separated parameter names or patterns to fit (e.g. 'k_*,J_M*'); default: "
-        "every stiffness, mass, inertia, viscous and Coulomb friction parameter and g_2",
+        "every stiffness, mass, inertia, viscous and Coulomb friction parameter and g_2; "
+        "'default' names that set (e.g. 'default,I_max' frees one more)",
     )
     parser.add_argument(
         "--fix",

@@ -68,7 +68,8 @@ class FitOptions:
     free : parameter names or fnmatch patterns (``"k_*"``) to fit; ``None`` selects the
         variant's default: every stiffness, inertia, mass, viscous and Coulomb friction
         parameter and g_2 (everything but the declaration's ``fixed`` and ``held``; one-axis
-        holds the unmeasured idler's J_2, B_2, tau_c2).
+        holds the unmeasured idler's J_2, B_2, tau_c2); the name ``"default"`` stands for
+        that set among the others (``("default", "I_max")``).
     fix : names or patterns removed from the free set (applied after ``free``).
     bounds : ``{name: (low, high)}`` in SI units for free parameters (0 < low for the
         log-scale ones, 0 <= low for nonnegative ones). Default (``problem.default_bounds``):

@@ -179,16 +179,37 @@ def default_free(model: Model) -> list[str]:
     return [name for name in model.parameter_names if name in free]
 
 
+#: In ``FitOptions.free``, the declaration's default free set (``default_free``), so that
+#: one more parameter is freed without listing the others: ``("default", "I_max")``.
+DEFAULT_FREE = "default"
+
+
 def resolve_free(model: Model, options: ProblemOptions) -> list[str]:
-    """The free parameter names: ``options.free`` (names or patterns; default the declaration's
-    free set) without ``options.fix``; ``FitError`` if none are left."""
+    """The free parameter names: ``options.free`` (names or patterns, ``DEFAULT_FREE`` for the
+    declaration's free set; default that set) without ``options.fix``; ``FitError`` if none
+    are left."""
     names = list(model.parameter_names)
-    free = _expand(options.free, names, "free") if options.free else default_free(model)
+    free = _expand_free(options.free, model) if options.free else default_free(model)
     fixed = _expand(options.fix, names, "fix") if options.fix else []
     free = [n for n in free if n not in fixed]
     if not free:
         raise FitError("no free parameters left after --fix; nothing to fit")
     return free
+
+
+def _expand_free(patterns: Sequence[str], model: Model) -> list[str]:
+    """``_expand`` of the free patterns, ``DEFAULT_FREE`` standing for ``default_free``
+    (a parameter of that name, in a user's model, is meant by it instead)."""
+    names = list(model.parameter_names)
+    if DEFAULT_FREE in names:
+        return _expand(patterns, names, "free")
+    selected: list[str] = []
+    for pattern in patterns:
+        chosen = (
+            default_free(model) if pattern == DEFAULT_FREE else _expand([pattern], names, "free")
+        )
+        selected += [n for n in chosen if n not in selected]
+    return selected
 
 
 def consider_priors(model: Model, consider: Mapping[str, float] | None) -> dict[str, float]:

@@ -61,6 +61,16 @@ def test_patterns_select_parameters(table, recording):
     assert problem.free_names == ("k_l", "k_r")
 
 
+def test_default_names_the_default_free_set_among_others(table, recording):
+    """``"default"`` in the free set is the declaration's default set (here with g_1, which
+    it holds), minus ``fix`` as ever; unknown names beside it still fail."""
+    problem = build_problem([recording], table, FitOptions(free=("default", "g_1"), fix=("k_b",)))
+    expected = [n for n in default_free(problem.model) if n != "k_b"] + ["g_1"]
+    assert list(problem.free_names) == expected
+    with pytest.raises(FitError, match="'g_3'"):
+        build_problem([recording], table, FitOptions(free=("default", "g_3")))
+
+
 def test_bounds_excluding_the_initial_value_fail_before_solving(table, recording):
     with pytest.raises(FitError, match=r"bounds for k_l \[1, 2\] exclude its initial value"):
         build_problem([recording], table, FitOptions(bounds={"k_l": (1.0, 2.0)}))
