@@ -5,13 +5,20 @@ motor's torque through the smooth current limit of ``one_axis_current_limit.py``
 i = (g_m u_m - K_e phidot_m) / R limited to +/- I_max. The realistic sim rig's amplifiers
 limit their current to 8 A (docs/realistic-rig.md, (A1)), reached from about 5.7 V at 0.71 ohm:
 the section-4.4 steps at 6 V do. I_max is the amplifier's data-sheet value, held in fits like
-the motor constants.
+the motor constants. Where the data sheet is unknown and the steps reach the limit, I_max can
+be fitted with the rest (``--free default,I_max``): on two drawn plants of issue 25 (limits
+6.9 and 7.7 A) it came to 7.6 and 7.0 A, determined, and the fit predicted held-out records
+14-24 x better than the plant's own linear reduction; on a plant without a limit it came to
+8.75 A, "poorly determined", and predicted 2.4 x worse than hframe-8
+(docs/studies/2026-11-28-fitting-the-current-limit.md).
 
 The thesis's belt lengths (section 4.6, position-dependent stiffness) are not parameters here:
 a user model's equations do not see the model options, so the model has constant stiffness
 (hframe-8's default).
 
     hframe-id fit --model-file models/hframe8_current_limit.py \\
+        --initial models/hframe-8-current-limit.yaml RECORDING.mcap ...
+    hframe-id fit --model-file models/hframe8_current_limit.py --free default,I_max \\
         --initial models/hframe-8-current-limit.yaml RECORDING.mcap ...
 """
 
