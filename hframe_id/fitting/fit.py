@@ -128,30 +128,23 @@ def _explaining_the_data(
     shared through ``simulations``) in its known-points report, and failed if it succeeded
     without that replay simulating the records better than the model-free prediction that
     nothing moves (``known_points.held_criterion``: each channel held at its mean) by more than
-    ``LIKELIHOOD_RATIO_95`` (a failed fit says so of the point it ended at), both judged on
-    the record channels that move beyond their sensors' noise (``Criterion.moving_terms``).
-    A fit of records whose inputs do not drive what the outputs show (a red-team record with
-    its voltages zeroed and its motion kept) ended "success", every parameter not
-    identified; judged from its own estimated initial states it still did (belts started
-    stretched move the model without input), as did a one-axis fit of current-limited pulses
-    whose replay from rest was worse than nothing moving (-1,314 against -1,683:
-    docs/studies/2026-11-26-replayed-verdict.md). Judged on every channel, a plant whose
-    friction holds it still in most records failed although its moving records were followed
-    as well as by its own reduction (dev plant 33 of issue 25, Coulomb x5.3: held out 1.01 x
-    the reduction's): nothing moving fits a still channel to its sensor's noise, which
-    outweighs what the moving ones show."""
+    ``LIKELIHOOD_RATIO_95`` (a failed fit says so of the point it ended at). A fit of records
+    whose inputs do not drive what the outputs show (a red-team record with its voltages
+    zeroed and its motion kept) ended "success", every parameter not identified; judged from
+    its own estimated initial states it still did (belts started stretched move the model
+    without input), as did a one-axis fit of current-limited pulses whose replay from rest
+    was worse than nothing moving (-1,314 against -1,683:
+    docs/studies/2026-11-26-replayed-verdict.md)."""
     criterion = Criterion.of(result, recordings, simulations)
-    starts = replayed_starts(result)
-    replayed = criterion(result.parameters, (starts,))
+    replayed = criterion(result.parameters, (replayed_starts(result),))
     report = replace(result.diagnostics.known_points, replayed=replayed)
     result = result.with_diagnostics(known_points=report)
-    fitted, held, channels = criterion.moving_terms(result.parameters, starts)
-    if fitted < held - LIKELIHOOD_RATIO_95:
+    held = criterion.held(result.parameters.variant)
+    if replayed < held - LIKELIHOOD_RATIO_95:
         return result
     why = (
         f"simulated from the records' start as validate replays it is no closer to them than "
-        f"every channel held still, on the {channels} record channel(s) that move beyond "
-        f"their sensors' noise ({criterion.name}: {fitted:.6g} against {held:.6g}); the "
+        f"every channel held still ({criterion.name}: {replayed:.6g} against {held:.6g}); the "
         "inputs do not drive what the outputs show under this model"
     )
     if not result.success:  # said of the point it ended at too

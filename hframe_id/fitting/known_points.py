@@ -160,19 +160,14 @@ def simulation_criterion(
     statistics as chi^2 / 2 differences are. inf if the simulation fails or leaves the
     finite numbers. ``simulations``: the fit's free runs (``Simulations``), reused where the
     same set was simulated from the same states."""
-    predictions = _predictions(params, recordings, initial_states, simulations)
+    starts = [None] * len(recordings) if initial_states is None else initial_states
+    if simulations is None:
+        predictions = _simulated(params, recordings, starts)
+    else:
+        predictions = simulations.of(params, recordings, starts)
     if predictions is None:
         return math.inf
     return _criterion(predictions, channel_std, latency_samples, concentrated)
-
-
-def _predictions(params, recordings, initial_states, simulations) -> list | None:
-    """(``Dataset``, predicted outputs) per recording from ``initial_states`` (None: each
-    at rest), through ``simulations`` where given; None if a simulation fails."""
-    starts = [None] * len(recordings) if initial_states is None else initial_states
-    if simulations is None:
-        return _simulated(params, recordings, starts)
-    return simulations.of(params, recordings, starts)
 
 
 def held_criterion(
@@ -186,35 +181,6 @@ def held_criterion(
     held at the mean of its valid samples (``variant``'s channels; the reference of a 0 %
     simulation fit), under the same noise levels and latencies as ``simulation_criterion``.
     A fit no better than this explains none of the data."""
-    return _criterion(_held(recordings, variant), channel_std, latency_samples, concentrated)
-
-
-def moving_channels(
-    recordings: Sequence[Recording],
-    sensor_std: dict[str, float],
-    latency_samples: dict[str, int] | None,
-    variant: str,
-) -> np.ndarray:
-    """(n_recordings, n_outputs) whether each channel of each recording moves beyond its
-    sensor's noise: held at its mean, its residuals' sum of squares over ``sensor_std``^2 is
-    above the 95 % quantile of chi^2 with N - 1 degrees of freedom (N valid samples), the
-    level that sensor noise alone exceeds once in 20 channels. A channel that does not move
-    holds no evidence of whether the inputs drive the outputs: nothing moving fits it to
-    its sensor's noise, whatever the model."""
-    return _moving(_held(recordings, variant), sensor_std, latency_samples)
-
-
-def _moving(held: list, sensor_std, latency_samples) -> np.ndarray:
-    """``moving_channels`` of the predictions that nothing moves (``_held``)."""
-    from scipy.stats import chi2
-
-    half_chi2 = _terms(held, sensor_std, latency_samples, False)
-    counts = _counts(held, latency_samples)
-    return (counts > 1) & (2.0 * half_chi2 > chi2.ppf(0.95, np.maximum(counts - 1, 1)))
-
-
-def _held(recordings: Sequence[Recording], variant: str) -> list:
-    """(``Dataset``, each channel held at the mean of its valid samples) per recording."""
     from hframe_id.models import build_model
     from hframe_id.validation.replay import channels
 
@@ -227,23 +193,15 @@ def _held(recordings: Sequence[Recording], variant: str) -> list:
             valid = data.measured[data.valid[:, j], j]
             held[:, j] = valid.mean() if valid.size else 0.0
         predictions.append((data, held))
-    return predictions
+    return _criterion(predictions, channel_std, latency_samples, concentrated)
 
 
 def _criterion(predictions, channel_std, latency_samples, concentrated: bool) -> float:
-    """C of (``Dataset``, predicted outputs (N, n_y) [SI]) per recording (module docstring),
-    the sum of ``_terms``; inf where it is not finite."""
-    total = float(np.sum(_terms(predictions, channel_std, latency_samples, concentrated)))
-    return total if np.isfinite(total) else math.inf
-
-
-def _terms(predictions, channel_std, latency_samples, concentrated: bool) -> np.ndarray:
-    """(n_recordings, n_outputs) each recording's and channel's term of C (module
-    docstring); a channel lagging by d samples is compared at sample k + d with the
-    prediction at k. ``channel_std``: output name -> std [SI], or one such mapping per
-    recording."""
+    """C of (``Dataset``, predicted outputs (N, n_y) [SI]) per recording (module docstring):
+    a channel lagging by d samples is compared at sample k + d with the prediction at k.
+    ``channel_std``: output name -> std [SI], or one such mapping per recording."""
     latency = latency_samples or {}
-    terms = np.zeros((len(predictions), len(predictions[0][0].names) if predictions else 0))
+    total = 0.0
     for i, (data, predicted) in enumerate(predictions):
         std = channel_std if isinstance(channel_std, Mapping) else channel_std[i]
         for j, name in enumerate(data.names):
@@ -253,24 +211,10 @@ def _terms(predictions, channel_std, latency_samples, concentrated: bool) -> np.
             residual = (data.measured[d:, j] - predicted[:n, j])[valid]
             squares, count = float(residual @ residual), int(valid.sum())
             if not concentrated:
-                terms[i, j] = 0.5 * squares / std[name] ** 2
+                total += 0.5 * squares / std[name] ** 2
             elif count:
-                terms[i, j] = _concentrated_term(squares, count, std[name])
-    return terms
-
-
-def _counts(predictions, latency_samples) -> np.ndarray:
-    """(n_recordings, n_outputs) the valid samples each term of ``_terms`` sums over."""
-    latency = latency_samples or {}
-    return np.array(
-        [
-            [
-                int(data.valid[int(latency.get(name, 0)) :, j].sum())
-                for j, name in enumerate(data.names)
-            ]
-            for data, _ in predictions
-        ]
-    )
+                total += _concentrated_term(squares, count, std[name])
+    return total if np.isfinite(total) else math.inf
 
 
 def _concentrated_term(squares: float, count: int, floor_std: float) -> float:
@@ -361,29 +305,6 @@ class Criterion:
         return held_criterion(
             self.recordings, self.channel_std, self.latency_samples, self.concentrated, variant
         )
-
-    def moving_terms(self, params: ParameterSet, initial_states) -> tuple[float, float, int]:
-        """(C of ``params`` from ``initial_states``, C of nothing moving, channels) over the
-        record channels that move beyond their sensors' noise (``moving_channels``, with
-        ``channel_std`` as the sensors' std: the floors of a concentrated criterion, the
-        weights of a sensor-weighted one); C of ``params`` inf if a simulation fails."""
-        still = _held(self.recordings, params.variant)
-        moving = _moving(still, self.channel_std, self.latency_samples)
-        held = _terms(still, *self._weighing())
-        predictions = _predictions(params, self.recordings, initial_states, self.simulations)
-        if predictions is None:
-            return math.inf, float(held[moving].sum()), int(moving.sum())
-        fitted = _terms(predictions, *self._weighing())
-        total = float(fitted[moving].sum())
-        return (
-            (total if np.isfinite(total) else math.inf),
-            float(held[moving].sum()),
-            int(moving.sum()),
-        )
-
-    def _weighing(self) -> tuple:
-        """The arguments after the predictions of ``_terms``."""
-        return self.channel_std, self.latency_samples, self.concentrated
 
     @property
     def name(self) -> str:

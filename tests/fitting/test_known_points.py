@@ -129,31 +129,3 @@ def test_a_fits_free_runs_are_simulated_once(monkeypatch, table, steps):
     x0 = [np.zeros(8)] * len(steps)
     simulation_criterion(table, steps, std, None, x0, simulations=simulations)
     assert len(runs) == 5
-
-
-def test_only_channels_that_move_beyond_their_sensors_noise_judge_the_explaining(truth, steps):
-    """``moving_channels``: a record whose outputs never change (a plant held by its
-    friction, its encoders on one count) does not move; a 4 V x step moves both motors and
-    x. ``Criterion.moving_terms`` judges on the moving channels only, so the still record
-    changes nothing of the verdict on the step (a still channel is fitted to its sensor's
-    noise by nothing moving, whatever the model: dev plant 33 of issue 25)."""
-    import dataclasses
-
-    from hframe_id.fitting.experiment import default_channel_std
-    from hframe_id.fitting.known_points import Criterion, moving_channels
-    from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
-    from hframe_id.models import build_model
-
-    step = steps[0]
-    still = dataclasses.replace(step, outputs=np.repeat(step.outputs[:1], step.n_samples, axis=0))
-    model = build_model("hframe-8")
-    sensor = {o.name: default_channel_std(step, o.name, model) for o in model.outputs}
-    moving = moving_channels([step, still], sensor, None, "hframe-8")
-    assert not moving[1].any()
-    assert moving[0, :3].all(), moving  # phi1, phi2, x
-    both = Criterion((step, still), sensor, {}, True).moving_terms(truth, [None, None])
-    alone = Criterion((step,), sensor, {}, True).moving_terms(truth, [None])
-    assert both == pytest.approx(alone, rel=1e-12)
-    fitted, held, channels = alone
-    assert channels == moving[0].sum()
-    assert fitted < held - LIKELIHOOD_RATIO_95
