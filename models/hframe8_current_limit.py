@@ -8,8 +8,10 @@ the section-4.4 steps at 6 V do. I_max is the amplifier's data-sheet value, held
 the motor constants. Where the data sheet is unknown and the steps reach the limit, I_max can
 be fitted with the rest (``--free default,I_max``): on two drawn plants of issue 25 (limits
 6.9 and 7.7 A) it came to 7.6 and 7.0 A, determined, and the fit predicted held-out records
-14-24 x better than the plant's own linear reduction; on a plant without a limit it came to
-8.75 A, "poorly determined", and predicted 2.4 x worse than hframe-8
+14-24 x better than the plant's own linear reduction. On plants without a limit it puts one
+where it helps the training records: 8.75 A, "poorly determined", 2.4 x worse than hframe-8
+held out; on another 8.16 A, determined to 1.4 %, 2.07 x worse than the reduction. So
+whether I_max is determined does not tell whether the rig has a limit; held-out records do
 (docs/studies/2026-11-28-fitting-the-current-limit.md).
 
 The thesis's belt lengths (section 4.6, position-dependent stiffness) are not parameters here:

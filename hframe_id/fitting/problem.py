@@ -201,15 +201,13 @@ def _expand_free(patterns: Sequence[str], model: Model) -> list[str]:
     """``_expand`` of the free patterns, ``DEFAULT_FREE`` standing for ``default_free``
     (a parameter of that name, in a user's model, is meant by it instead)."""
     names = list(model.parameter_names)
-    if DEFAULT_FREE in names:
-        return _expand(patterns, names, "free")
-    selected: list[str] = []
-    for pattern in patterns:
-        chosen = (
-            default_free(model) if pattern == DEFAULT_FREE else _expand([pattern], names, "free")
-        )
-        selected += [n for n in chosen if n not in selected]
-    return selected
+    if DEFAULT_FREE not in names:
+        patterns = [
+            name
+            for pattern in patterns
+            for name in (default_free(model) if pattern == DEFAULT_FREE else [pattern])
+        ]
+    return _expand(patterns, names, "free")
 
 
 def consider_priors(model: Model, consider: Mapping[str, float] | None) -> dict[str, float]:
