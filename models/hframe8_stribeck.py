@@ -1,7 +1,8 @@
 """The H-frame 8th-order model with current-limited amplifiers and Stribeck friction: a user
 model.
 
-``hframe8_current_limit.py`` (Ch. 4 with the amplifiers' current limit) with a Stribeck curve
+The built-in hframe-8-current-limit (Ch. 4 with the amplifiers' current limit,
+``hframe_id.models.hframe8``) with a Stribeck curve
 on each friction-bearing coordinate: the Coulomb level rises from F_c to a static (breakaway)
 level F_s at rest, F_c + (F_s - F_c) exp(-(v / v_St)^2) (``hframe_id.models.lagrange``). The
 realistic sim rig's friction has such a peak (docs/realistic-rig.md, (S1)); a model without
@@ -15,10 +16,14 @@ v_St = 0.5 rad/s and 10 mm/s.
     hframe-id fit --model-file models/hframe8_stribeck.py RECORDING.mcap ...
 """
 
-from hframe_id.models import ParameterSpec, declare, sibling_module
+from hframe_id.models import ParameterSpec, declaration, declare, hframe8
+from hframe_id.models.common import MEASURED, limited_current, spring_energy
 
+#: The built-in model this one extends by a Stribeck curve.
+LIMITED = declaration("hframe-8-current-limit")
 
-current_limited = sibling_module(__file__, "hframe8_current_limit.py")
+#: (coordinate, amplifier gain, input) of each motor.
+MOTORS = (("phi1", "g_1", "u1"), ("phi2", "g_2", "u2"))
 
 #: coordinate: (viscous, Coulomb, static, Stribeck velocity) parameter names.
 FRICTION = {
@@ -30,19 +35,37 @@ FRICTION = {
 
 
 def equations(q, qdot, u, p):
-    """``hframe8_current_limit.equations`` with a Stribeck curve on every friction."""
-    return {**current_limited.equations(q, qdot, u, p), "friction": FRICTION}
+    """Energies (eq. 4.9-4.16) and forces of hframe-8-current-limit, a Stribeck curve on every
+    friction. The belt lengths (section 4.6) are not parameters: a user model's equations do
+    not see the model options, so the stiffness is constant (hframe-8's default)."""
+    stretch = hframe8.stretches([q[c.name] for c in hframe8.COORDINATES], p["r"])
+    forces = {}
+    for rate, gain, volts in MOTORS:
+        current = (p[gain] * u[volts] - p["K_e"] * qdot[rate]) / p["R"]
+        forces[rate] = p["K_t"] * limited_current(current, p["I_max"])
+    return {
+        "kinetic": 0.5
+        * (
+            p["M_bridge"] * qdot["x"] ** 2
+            + p["M_cart"] * qdot["y"] ** 2
+            + p["J_M1"] * qdot["phi1"] ** 2
+            + p["J_M2"] * qdot["phi2"] ** 2
+        ),
+        "potential": sum(spring_energy(p[f"k_{s}"], stretch[s]) for s in hframe8.SPRINGS),
+        "forces": forces,
+        "friction": FRICTION,
+    }
 
 
 MODEL = declare(
     name="hframe-8-stribeck",
     description="H-frame reduced 8th-order model with current-limited amplifiers and "
     "Stribeck friction (Ch. 4 + a servo amplifier's peak current + a breakaway peak)",
-    coordinates=current_limited.MODEL.coordinates,
-    inputs=current_limited.MODEL.inputs,
-    outputs=current_limited.MODEL.outputs,
+    coordinates=list(hframe8.COORDINATES),
+    inputs=list(hframe8.INPUTS),
+    outputs=list(hframe8.OUTPUTS),
     parameters=[
-        *current_limited.MODEL.parameters,
+        *(spec for spec in LIMITED.parameters if spec.required),  # not the belt lengths
         ParameterSpec("tau_sM1", "N m", "motor 1 static (breakaway) friction torque"),
         ParameterSpec("tau_sM2", "N m", "motor 2 static (breakaway) friction torque"),
         ParameterSpec("F_s_cart", "N", "cart static (breakaway) friction force"),
@@ -53,6 +76,6 @@ MODEL = declare(
     equations=equations,
     reference="hframe-8-stribeck.yaml",
     reference_label="Table 4.1 + 4.2, 8 A amplifiers, guessed Stribeck curves",
-    fixed=current_limited.MODEL.fixed,
-    held=current_limited.MODEL.held,
+    fixed=(*MEASURED, "I_max"),
+    held=LIMITED.held,
 )

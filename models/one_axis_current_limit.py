@@ -5,7 +5,8 @@ its command at any current. A servo amplifier limits its current instead; the re
 rig does (docs/realistic-rig.md, (A1)-(A2): 8 A, reached by the 10 V one-axis pulse). Here
 the current is limited smoothly,
 
-    i_lim = i - s(i - I_max) + s(-i - I_max),   s(z) = w ln(1 + e^(z / w)),  w = LIMIT_WIDTH,
+    i_lim = i - s(i - I_max) + s(-i - I_max),   s(z) = w ln(1 + e^(z / w)),  w = 0.02 A
+    (``hframe_id.models.common.limited_current``, shared with the built-in hframe-8-current-limit),
 
 a clip with its corners rounded over a few w: i to 1e-20 A up to I_max - 1 A, I_max - w ln 2
 at i = I_max (0.17 % below the plant's clip at 8 A), I_max to 1e-10 A from I_max + 0.5 A on.
@@ -16,25 +17,8 @@ I_max is the amplifier's data-sheet value, held in fits like the motor constants
         datasets/realistic/10V_oneaxis.mcap
 """
 
-import casadi as ca
-
-from hframe_id.models import ParameterSpec, declare, one_axis
-
-#: Corner width w [A] of the smooth limit. The earlier limit i / (1 + (i / I_max)^20)^(1/20)
-#: gave 7.75 A where the plant clips 8.05 A to 8.0 A: 3 % less torque through the whole 6 V
-#: H-frame steps (docs/studies/2026-11-24-model-mismatch-hframe-8.md, "hframe-8 with the
-#: amplifiers' current limit").
-LIMIT_WIDTH = 0.02
-
-
-def _softplus(z):
-    """w ln(1 + e^(z / w)) [A], written so that no exponential overflows."""
-    return ca.fmax(z, 0) + LIMIT_WIDTH * ca.log1p(ca.exp(-ca.fabs(z) / LIMIT_WIDTH))
-
-
-def limited_current(i, i_max):
-    """The current i [A] limited smoothly to +/- i_max [A] (odd in i)."""
-    return i - _softplus(i - i_max) + _softplus(-i - i_max)
+from hframe_id.models import declare, one_axis
+from hframe_id.models.common import CURRENT_LIMIT, limited_current
 
 
 def equations(q, qdot, u, p):
@@ -62,7 +46,7 @@ MODEL = declare(
     outputs=list(one_axis.OUTPUTS),
     parameters=[
         *one_axis.PARAMETERS,
-        ParameterSpec("I_max", "A", "amplifier current limit (data sheet)"),
+        CURRENT_LIMIT,
     ],
     equations=equations,
     reference="one-axis-current-limit.yaml",

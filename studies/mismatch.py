@@ -17,7 +17,7 @@ hframe-8, I_max the plant's amplifier limit).
 
     python -m studies.mismatch --seeds 0 1 2 --noise-seeds 0 1 2 3 4
     python -m studies.mismatch --train multisine --seeds -1 0 1
-    python -m studies.mismatch --model-file models/hframe8_current_limit.py --seeds -1
+    python -m studies.mismatch --initial models/hframe-8-current-limit.yaml --seeds -1
 """
 
 from __future__ import annotations

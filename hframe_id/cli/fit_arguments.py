@@ -10,7 +10,7 @@ import argparse
 from hframe_id.cli.numbers import add_number
 from hframe_id.cli.outputs import output_folder
 from hframe_id.fitting.link_options import CONSIDER_METHODS, CONTINUITY, UNCERTAINTY_METHODS
-from hframe_id.fitting.options import NOISE_METHODS, FitOptions
+from hframe_id.fitting.options import NOISE_METHODS, STRUCTURES, FitOptions
 from hframe_id.fitting.solvers import solver_names
 
 #: Most fits a multistart portfolio may run (``--starts``): each is a whole fit (2-5 s on a
@@ -185,7 +185,18 @@ def _add_transcription_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_strategy_options(parser: argparse.ArgumentParser) -> None:
-    """The stages: zero-reachable friction, known points, the multistart portfolio, the start."""
+    """The stages: zero-reachable friction, known points, the multistart portfolio, the start,
+    the structure."""
+    parser.add_argument(
+        "--structure",
+        choices=STRUCTURES,
+        default=FitOptions.structure,
+        help="'choose' (default): a model that nests in a larger one (hframe-8 in "
+        "hframe-8-current-limit, amplifiers limiting current to I_max) is fitted as that one "
+        "too, I_max free, and the larger kept where it replays the records better by the 95 "
+        "%% likelihood ratio with I_max determined (the written file is then of that "
+        "variant); 'as-given': the start's model only",
+    )
     parser.add_argument(
         "--zero-reachable",
         default="",

@@ -264,7 +264,10 @@ def run(args: argparse.Namespace) -> int:
         result = fit_recordings(recordings, initial, options)
         cross_validation = None
         if result.success and len(recordings) > 1 and not args.no_cross_validation:
-            cross_validation = _cross_validate(recordings, initial, options, args.quiet)
+            from hframe_id.fitting.structure_choice import refit_setup
+
+            fold_start, fold_options = refit_setup(result, initial, options)
+            cross_validation = _cross_validate(recordings, fold_start, fold_options, args.quiet)
             if cross_validation is not None:
                 from hframe_id.fitting.jackknife import with_jackknife_intervals
 

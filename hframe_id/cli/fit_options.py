@@ -105,6 +105,7 @@ def fit_options(args: argparse.Namespace) -> FitOptions:
         initial_state=args.initial_state,
         zero_reachable=_names(args.zero_reachable) if args.zero_reachable else (),
         starts=args.starts,
+        structure=args.structure,
         start_seed=args.start_seed,
         screen_start=not args.start_as_given,
         max_iterations=args.max_iterations,

@@ -35,7 +35,7 @@ from hframe_id.simulation.compiled import evaluate, maybe_compile
 from hframe_id.simulation.friction import FrictionOptions
 from hframe_id.simulation.open_loop import default_substeps
 
-HFRAME_VARIANTS = ("hframe-8", "hframe-20")
+HFRAME_VARIANTS = ("hframe-8", "hframe-8-current-limit", "hframe-20")
 #: The two motor-angle loops of Fig. 5.2 (their gains and limits: the step's run-time inputs).
 THESIS_LOOPS = pid_controller(
     {"u1": ("phi1", "phi1_ref"), "u2": ("phi2", "phi2_ref")}, PIDGains(0.0), name="thesis-pid"

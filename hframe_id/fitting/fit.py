@@ -12,7 +12,9 @@ is the strategy around it, what makes a success mean the parameters are right:
 2. known points: the fit is judged against every point it knows (the start, the
    equation-error estimate, the model's reference files, the user's) by the criterion of its
    written file, and continues from a better one (``known_points``);
-3. a multistart portfolio on request (``FitOptions.starts``, ``multistart``).
+3. a multistart portfolio on request (``FitOptions.starts``, ``multistart``);
+4. the structure: a model that nests in a larger one (hframe-8 in hframe-8-current-limit) is
+   fitted as that one too, and the data choose (``structure_choice``).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ from hframe_id.fitting.start_screen import (
     screen_start,
 )
 from hframe_id.fitting.stiffness_wall import at_the_wall
+from hframe_id.fitting.structure_choice import with_structure_choice
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -98,6 +101,7 @@ def fit_recordings(
     if options.continuity == "exact":
         judged = _never_worse_than_known(recordings, initial, options, result, screen, simulations)
         result = _explaining_the_data(recordings, judged, simulations)
+        result = with_structure_choice(recordings, initial, options, result, fit_recordings)
     result = replace(result, wall_time_s=time.perf_counter() - start)
     return result
 

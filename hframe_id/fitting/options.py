@@ -30,6 +30,8 @@ from hframe_id.fitting.option_checks import changed_fields, one_of, positive
 from hframe_id.fitting.strategy_settings import StrategySettings
 
 NOISE_METHODS = ("auto", "sensor", "estimate")
+#: How a fit treats a model that nests in a larger one (``FitOptions.structure``).
+STRUCTURES = ("choose", "as-given")
 #: The settings ``FitOptions`` may leave to the model (None), which ``for_model`` resolves:
 #: those a model may declare ``fit_defaults`` for (``models.declaration.FIT_DEFAULT_KEYS``,
 #: not imported here because that module imports CasADi; a test keeps the two equal).
@@ -207,6 +209,10 @@ class FitOptions:
     screen_start : begin from the best of the start, the model's reference files and
         ``known_points`` by their simulation from rest (``hframe_id.fitting.start_screen``;
         default True); False: from the start as given.
+    structure : ``"choose"`` (default): where the model nests in a larger one (hframe-8 in
+        hframe-8-current-limit, ``ModelDeclaration.nests_in``), fit that one as well and keep
+        the one the data choose (``hframe_id.fitting.structure_choice``); ``"as-given"``: the
+        model of ``initial`` only.
     """
 
     free: tuple[str, ...] | None = None
@@ -246,6 +252,7 @@ class FitOptions:
     starts: int = 1
     screen_start: bool = True
     start_seed: int = 0
+    structure: str = "choose"
     strategy: StrategySettings = StrategySettings()
 
     def __post_init__(self) -> None:
@@ -287,11 +294,12 @@ class FitOptions:
         object.__setattr__(self, "smoothing_schedule", tuple(float(v) for v in schedule))
 
     def _check_strategy(self) -> None:
-        """The strategy's own settings: ``noise`` one of ``NOISE_METHODS``, ``max_misfit``
-        None or > 0 [noise stds], ``starts`` a whole number > 0, ``start_seed`` an integer
-        >= 0, ``verbose`` 0, 1 or 2, ``progress`` None or callable, ``strategy`` a
-        ``StrategySettings``."""
+        """The strategy's own settings: ``noise`` one of ``NOISE_METHODS``, ``structure`` one
+        of ``STRUCTURES``, ``max_misfit`` None or > 0 [noise stds], ``starts`` a whole number
+        > 0, ``start_seed`` an integer >= 0, ``verbose`` 0, 1 or 2, ``progress`` None or
+        callable, ``strategy`` a ``StrategySettings``."""
         one_of("noise", self.noise, NOISE_METHODS)
+        one_of("structure", self.structure, STRUCTURES)
         if self.max_misfit is not None:
             positive("max_misfit", self.max_misfit)
         positive("starts", self.starts, integer=True)

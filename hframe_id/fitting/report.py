@@ -110,7 +110,7 @@ def comparable_truth(
         return None, "", ""
     if truth.variant == variant:
         return truth, "truth", "and the plant's true parameters, which the recordings carry."
-    if truth.variant == "hframe-20" and variant == "hframe-8":
+    if truth.variant == "hframe-20" and variant in ("hframe-8", declaration("hframe-8").nests_in):
         return (
             reduce_to_hframe8(truth),
             "truth (section-4.1 reduction of the plant)",

@@ -45,7 +45,8 @@ def parameter_table(
     """Markdown rows of the free parameters: reference value (``thesis``, labelled
     ``label``), fitted value, interval, the experiment-level jackknife's interval (after a
     cross-validation), difference from the reference [%], identifiability and, with
-    ``truth``, the error against it [%]; units in the parameter names."""
+    ``truth``, the error against it [%] ("n/a" where the truth's model lacks the parameter,
+    as a section-4.1 reduction lacks I_max); units in the parameter names."""
     header = (
         "parameter",
         f"reference ({label})",
@@ -78,8 +79,10 @@ def parameter_table(
             ci = est.jackknife_ci95
             cells = cells[:4] + (f"[{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "n/a",) + cells[4:]
         if truth:
-            t = truth.values[est.name]
-            cells += (_fmt(t), _relative_difference(est.estimate, t, 3))
+            t = truth.values.get(est.name)  # None: a parameter the truth's model lacks
+            cells += (
+                ("n/a", "n/a") if t is None else (_fmt(t), _relative_difference(est.estimate, t, 3))
+            )
         rows.append(cells)
     return markdown_table(rows)
 

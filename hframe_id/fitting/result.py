@@ -17,6 +17,7 @@ from hframe_id.fitting.problem import FitProblem
 from hframe_id.fitting.solver import StageReport
 from hframe_id.fitting.start_screen import ScreenedStart
 from hframe_id.fitting.statistics import Statistics
+from hframe_id.fitting.structure_choice import StructureChoice
 from hframe_id.parameters import ParameterSet
 
 
@@ -75,7 +76,8 @@ class FitDiagnostics:
     (``known_points.KnownPointsReport``); ``starts``: each start of a multistart portfolio
     (``multistart.StartOutcome``; empty without one); ``start_screen``: where the fit began
     (``start_screen.ScreenedStart``); ``consider``: what the intervals
-    assume about held parameters (``consider.Consider``). None where that step did not
+    assume about held parameters (``consider.Consider``); ``structure``: which of two nested
+    models the fit kept (``structure_choice.StructureChoice``). None where that step did not
     run."""
 
     channel_std: dict[str, float] = field(default_factory=dict)
@@ -88,6 +90,7 @@ class FitDiagnostics:
     starts: tuple[StartOutcome, ...] = ()
     consider: Consider | None = None
     start_screen: ScreenedStart | None = None
+    structure: StructureChoice | None = None
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,11 @@ from hframe_id.models.user import declare, load_model_file, sibling_module
 VARIANTS: tuple[str, ...] = tuple(
     register(m.DECLARATION).name for m in (one_axis, hframe20, hframe8)
 )
+#: Built-in variants beyond the thesis's: hframe-8 with current-limited amplifiers.
+EXTENDED_VARIANTS: tuple[str, ...] = (register(hframe8.CURRENT_LIMITED).name,)
 
 __all__ = [
+    "EXTENDED_VARIANTS",
     "VARIANTS",
     "Friction",
     "LagrangianSystem",

@@ -96,6 +96,9 @@ class ModelDeclaration:
         or ``"none"``, see ``hframe_id.fitting.FitOptions``). A plant whose open-loop
         simulation drifts (an integrator under closed-loop control) is fitted on short
         independent horizons.
+    nests_in : the variant that holds this one as a limit, with one parameter more (hframe-8
+        in hframe-8-current-limit: I_max -> infinity), or None. A fit tries that variant as
+        well and keeps the one the data choose (``hframe_id.fitting.structure_choice``).
     """
 
     name: str
@@ -112,6 +115,7 @@ class ModelDeclaration:
     source: str = "hframe_id"
     model_file: Path | None = None
     fit_defaults: tuple[tuple[str, Any], ...] = ()
+    nests_in: str | None = None
 
     def __post_init__(self) -> None:
         check_declaration(self)

@@ -1,25 +1,19 @@
-"""The smooth current limit of models/one_axis_current_limit.py (shared by the hframe-8 model
-with current limit): a clip with rounded corners, where the plant (docs/realistic-rig.md, (A1))
-clips exactly."""
-
-import importlib.util
+"""The smooth current limit of ``hframe_id.models.common`` (hframe-8-current-limit and
+models/one_axis_current_limit.py): a clip with rounded corners, where the plant
+(docs/realistic-rig.md, (A1)) clips exactly."""
 
 import casadi as ca
 import numpy as np
 import pytest
 
-from hframe_id.resources import models_dir
+from hframe_id.models import common
 
 
 @pytest.fixture(scope="module")
 def limit():
-    path = models_dir() / "one_axis_current_limit.py"
-    spec = importlib.util.spec_from_file_location("one_axis_current_limit_under_test", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     i = ca.SX.sym("i")
-    value = module.limited_current(i, 8.0)
-    return module, ca.Function("limit", [i], [value, ca.jacobian(value, i)])
+    value = common.limited_current(i, 8.0)
+    return common, ca.Function("limit", [i], [value, ca.jacobian(value, i)])
 
 
 def _value(limit, current):
@@ -28,7 +22,7 @@ def _value(limit, current):
 
 def test_a_clip_with_rounded_corners(limit):
     module, _ = limit
-    width = module.LIMIT_WIDTH
+    width = module.CURRENT_LIMIT_WIDTH_A
     # Below the limit by 1 A: the current itself, to rounding (the correction is 2e-22 A).
     for current in (0.0, 2.8, -5.0, 7.0):
         assert _value(limit, current) == pytest.approx(current, abs=1e-15)

@@ -1,4 +1,5 @@
-"""models/hframe8_current_limit.py: hframe-8 with current-limited amplifiers (a user model)."""
+"""hframe-8-current-limit: hframe-8 with current-limited amplifiers (built in,
+``hframe_id.models.hframe8.CURRENT_LIMITED``)."""
 
 import numpy as np
 
@@ -9,8 +10,7 @@ from hframe_id.validation.replay import simulate_channels
 
 def test_without_a_binding_limit_the_model_is_hframe8(step_recording):
     """I_max = 1e6 A: the simulation of a 6 V step is hframe-8's to 1e-12 of each channel's
-    range (measured: 2e-13 on y, the smallest channel, 4e-16 to 6e-16 on the others). The
-    parameter file loads the model through its ``model_file``."""
+    range (measured: 2e-13 on y, the smallest channel, 4e-16 to 6e-16 on the others)."""
     limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
     plain = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
     assert limited.variant == "hframe-8-current-limit"

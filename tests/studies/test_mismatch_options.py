@@ -51,22 +51,25 @@ def test_training_criterion_prefers_the_parameters_that_made_the_data():
     assert training_criterion(table, [recording]) < training_criterion(stiffer, [recording])
 
 
-def test_model_file_and_initial_reach_the_trials(monkeypatch):
+def test_model_file_and_initial_reach_the_trials(monkeypatch, tmp_path):
     """--model-file registers the user model; the start defaults to its reference file, and
     --initial names another; without either, Table 4.2 as before."""
+    import shutil
+
     from hframe_id.resources import models_dir
 
     calls = []
     monkeypatch.setattr(mismatch, "run_trial", lambda seed, **kw: calls.append((seed, kw)))
     monkeypatch.setattr(mismatch, "_line", lambda trial: "trial")
-    model = str(models_dir() / "hframe8_current_limit.py")
-    initial = models_dir() / "hframe-8-current-limit.yaml"
+    model = str(models_dir() / "hframe8_stribeck.py")
+    reference = models_dir() / "hframe-8-stribeck.yaml"
+    other = shutil.copy(reference, tmp_path / "other-start.yaml")
     assert mismatch.main(["--model-file", model, "--seeds", "0"]) == 0
-    assert mismatch.main(["--model-file", model, "--initial", str(initial), "--seeds", "1"]) == 0
+    assert mismatch.main(["--model-file", model, "--initial", str(other), "--seeds", "1"]) == 0
     assert mismatch.main(["--seeds", "2"]) == 0
     assert [(seed, kw["start"].resolve()) for seed, kw in calls] == [
-        (0, initial.resolve()),
-        (1, initial.resolve()),
+        (0, reference.resolve()),
+        (1, other.resolve()),
         (2, mismatch.TABLE_4_2.resolve()),
     ]
 
@@ -74,7 +77,7 @@ def test_model_file_and_initial_reach_the_trials(monkeypatch):
 def _bad_options():
     from hframe_id.resources import models_dir
 
-    model = str(models_dir() / "hframe8_current_limit.py")
+    model = str(models_dir() / "hframe8_stribeck.py")
     return [
         (["--model-file", "no/such/model.py"], "argument --model-file: model file"),
         (["--initial", "no/such/start.yaml"], "--initial: "),

@@ -1,0 +1,222 @@
+"""A model that nests in a larger one: fit the larger one too, keep the one the data choose.
+
+hframe-8 is hframe-8-current-limit with I_max -> infinity (``ModelDeclaration.nests_in``).
+Fitted to a rig whose amplifiers limit their current below what its steps ask, hframe-8 bends
+its other parameters around the missing limit: it follows the training records better than
+the plant's own reduction and predicts held-out records 1.5-2.6 x worse; the limited model
+with I_max free predicts them 0.04-0.15 x the reduction's (issue 25; dev plants 48, 1 and test
+plant 1188 in docs/studies/2026-11-28-fitting-the-current-limit.md). Where the rig has no
+limit, the larger model puts one where it helps the training records, and predicts worse.
+So the data choose, where the smaller model's fit found model error (it estimated noise
+levels: ``noise_rounds``; a model that follows the records to its sensors' noise lacks nothing
+the data can show), in three steps:
+
+1. **Start.** The larger fit starts from the user's start, the extra parameter at the best,
+   by the start screen's criterion (``start_screen``: concentrated, from rest), of the
+   larger model's reference value times 2^(k/4), k = -4..4 (within the seeded starts' x/÷2,
+   ``multistart.SPREAD``). If none of them beats the smaller model itself there, the larger
+   fit from there is the smaller one's (a limit that does not bind has no gradient): it is
+   not run. (Profiled at the point the smaller fit began from instead, the equation-error
+   estimate whose parameters are bent around the missing limit, test plant 1188's 7.5 A limit
+   started at 11.3 A and ended undetermined at 12.2 A.)
+2. **Fit.** The larger model, with the smaller fit's free set and the extra parameter free,
+   its structure as given.
+3. **Choice.** The larger model is kept when its fit succeeded, its written file simulates
+   the records better than the smaller one's by more than the 95 % likelihood ratio on the
+   smaller fit's criterion (``known_points.Criterion``, as validate replays each file), and
+   the extra parameter is identified (relative std within
+   ``FitOptions.identifiability_threshold``): a parameter the data do not pin is a stand-in
+   for some other mismatch, not a limit. Otherwise the smaller model's fit stands.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+from hframe_id.fitting.known_points import Criterion, replayed_starts
+from hframe_id.fitting.multistart import SPREAD
+from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
+from hframe_id.fitting.options import FitOptions
+from hframe_id.fitting.problem import DEFAULT_FREE
+from hframe_id.fitting.progress import labelled, progress_sink
+from hframe_id.models import build_model, declaration
+from hframe_id.parameters import ParameterSet, load_parameter_file
+
+if TYPE_CHECKING:  # the result holds a StructureChoice
+    from hframe_id.fitting.result import FitResult
+
+#: Start candidates of the extra parameter per octave of ``SPREAD``: quarter-octave steps.
+STEPS_PER_OCTAVE = 4
+
+
+@dataclass(frozen=True)
+class StructureChoice:
+    """Which of two nested models a fit kept, and why.
+
+    Attributes
+    ----------
+    asked, larger : the model of the fit's start, and the model it nests in.
+    extra, unit : the larger model's additional parameter and its unit.
+    start : the larger fit's start (None: not run, the smaller model followed the records to
+        the sensors' noise, or no start value improved on it at the start).
+    criteria : the criterion of each fitted model's written file, by variant, on the smaller
+        fit's scale (``known_points.Criterion``; lower is better).
+    extra_value, extra_relative_std : the larger fit's estimate [unit] and its relative std.
+    larger_success : whether the larger fit succeeded.
+    chosen : the variant kept.
+    """
+
+    asked: str
+    larger: str
+    extra: str
+    unit: str
+    start: ParameterSet | None
+    criteria: dict[str, float]
+    extra_value: float = math.nan
+    extra_relative_std: float = math.nan
+    larger_success: bool = False
+    chosen: str = ""
+
+    @property
+    def tried(self) -> bool:
+        """Whether the larger model was fitted."""
+        return self.start is not None
+
+    def statement(self) -> str:
+        """One sentence: what was tried, what was kept, and the numbers that decided."""
+        if not self.tried and not self.criteria:
+            return (
+                f"{self.larger} not tried: {self.asked} follows the records to the sensors' noise"
+            )
+        if not self.tried:
+            return (
+                f"{self.larger} not tried: no {self.extra} within x/÷2 of its reference "
+                f"improved on {self.asked} at the start"
+            )
+        larger = self.criteria.get(self.larger, math.nan)
+        numbers = (
+            f"{self.extra} = {self.extra_value:.4g} {self.unit} (relative std "
+            f"{self.extra_relative_std:.2g}), criterion {larger:.6g} against "
+            f"{self.criteria[self.asked]:.6g} for {self.asked}"
+        )
+        if self.chosen == self.larger:
+            return f"{self.larger} kept: {numbers}"
+        if not self.larger_success:
+            why = f"the {self.larger} fit failed"
+        elif self.criteria[self.larger] >= self.criteria[self.asked] - LIKELIHOOD_RATIO_95:
+            why = f"{self.larger} not better by the 95 % likelihood ratio"
+        else:
+            why = f"{self.extra} poorly determined: a stand-in for some other mismatch"
+        return f"{self.asked} kept, {why} ({numbers})"
+
+
+def _extra_parameter(asked: str, larger: str) -> str:
+    """The one parameter of ``larger`` that ``asked`` lacks."""
+    (extra,) = [
+        name
+        for name in declaration(larger).parameter_names
+        if name not in declaration(asked).parameter_names
+    ]
+    return extra
+
+
+def _in_larger(params: ParameterSet, larger: str, extra: str, value: float) -> ParameterSet:
+    """``params`` as a parameter set of ``larger`` with ``extra`` = ``value``."""
+    reference = load_parameter_file(declaration(larger).reference_file)
+    kept = {k: v for k, v in params.values.items() if k in build_model(larger).parameter_names}
+    return replace(
+        reference.replace_values(**kept, **{extra: value}),
+        title=f"{params.title}, {extra} from its profile",
+        source=params.source,
+    )
+
+
+def _larger_start(
+    initial: ParameterSet, larger: str, extra: str, criterion: Criterion
+) -> ParameterSet | None:
+    """The larger model's start (step 1 of the module's doc), or None."""
+    reference = load_parameter_file(declaration(larger).reference_file).values[extra]
+    octaves = math.log2(SPREAD[1])
+    steps = round(STEPS_PER_OCTAVE * octaves)
+    candidates = [
+        _in_larger(initial, larger, extra, reference * 2.0 ** (k / STEPS_PER_OCTAVE))
+        for k in range(-steps, steps + 1)
+    ]
+    scores = [criterion(c) for c in candidates]
+    best = min(range(len(candidates)), key=scores.__getitem__)
+    return candidates[best] if scores[best] < criterion(initial) else None
+
+
+def larger_options(options: FitOptions, extra: str) -> FitOptions:
+    """The options of the larger model's fit: the same free set and the extra parameter, the
+    structure as given, no known points (they are of the smaller model)."""
+    free = (*(options.free or (DEFAULT_FREE,)), extra)
+    progress = labelled(progress_sink(options), f"with {extra}")
+    return replace(
+        options, free=free, structure="as-given", known_points=(), progress=progress, verbose=0
+    )
+
+
+def with_structure_choice(
+    recordings, initial: ParameterSet, options: FitOptions, result: FitResult, fit
+) -> FitResult:
+    """``result`` (the fit of ``initial``'s model), or the fit of the model it nests in where
+    the data choose that one (module doc), with the choice in ``diagnostics.structure`` and
+    its statement in the message. ``fit(recordings, initial, options)`` fits."""
+    asked = initial.variant
+    larger = declaration(asked).nests_in
+    if options.structure != "choose" or larger is None or options.continuity != "exact":
+        return result
+    extra = _extra_parameter(asked, larger)
+    unit = {s.name: s.unit for s in declaration(larger).parameters}[extra]
+    noise = result.diagnostics.noise
+    if noise is None or noise.method != "estimated":
+        return _chosen(result, StructureChoice(asked, larger, extra, unit, None, {}, chosen=asked))
+    criterion = Criterion.of(result, recordings)
+    criteria = {asked: criterion(result.parameters, (replayed_starts(result),))}
+    screen = result.diagnostics.start_screen
+    judge = criterion if screen is None or screen.criterion is None else screen.criterion
+    start = _larger_start(initial, larger, extra, judge)
+    if start is None:
+        choice = StructureChoice(asked, larger, extra, unit, None, criteria, chosen=asked)
+        return _chosen(result, choice)
+    other = fit(recordings, start, larger_options(options, extra))
+    criteria[larger] = criterion(other.parameters, (replayed_starts(other),))
+    estimate = other.estimates[extra]
+    keep = (
+        other.success
+        and criteria[larger] < criteria[asked] - LIKELIHOOD_RATIO_95
+        and estimate.identified
+    )
+    choice = StructureChoice(
+        asked,
+        larger,
+        extra,
+        unit,
+        start,
+        criteria,
+        extra_value=estimate.estimate,
+        extra_relative_std=estimate.relative_std,
+        larger_success=other.success,
+        chosen=larger if keep else asked,
+    )
+    return _chosen(other if keep else result, choice)
+
+
+def _chosen(result: FitResult, choice: StructureChoice) -> FitResult:
+    """``result`` with the choice in its diagnostics and its statement in the message."""
+    result = result.with_diagnostics(structure=choice)
+    return replace(result, message=f"{result.message}; {choice.statement()}")
+
+
+def refit_setup(
+    result: FitResult, initial: ParameterSet, options: FitOptions
+) -> tuple[ParameterSet, FitOptions]:
+    """The start and options that fit the structure ``result`` kept without choosing again
+    (a cross-validation's folds): the larger model's start and options where it was kept."""
+    choice = result.diagnostics.structure
+    if choice is None or choice.chosen != choice.larger:
+        return initial, replace(options, structure="as-given")
+    return choice.start, replace(larger_options(options, choice.extra), progress=options.progress)

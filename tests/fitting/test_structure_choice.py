@@ -1,0 +1,118 @@
+"""Unit tests of ``hframe_id.fitting.structure_choice`` (no fit: results made by hand)."""
+
+import dataclasses
+import math
+
+import pytest
+
+from hframe_id.errors import OptionError
+from hframe_id.fitting import FitOptions
+from hframe_id.fitting.structure_choice import (
+    StructureChoice,
+    larger_options,
+    refit_setup,
+    with_structure_choice,
+)
+from hframe_id.models import EXTENDED_VARIANTS, build_model, declaration
+from hframe_id.parameters import load_parameter_file
+from hframe_id.resources import models_dir
+
+LARGER = "hframe-8-current-limit"
+
+
+def _choice(**changes):
+    limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
+    choice = StructureChoice(
+        asked="hframe-8",
+        larger=LARGER,
+        extra="I_max",
+        unit="A",
+        start=limited,
+        criteria={"hframe-8": -1000.0, LARGER: -1500.0},
+        extra_value=7.5,
+        extra_relative_std=0.01,
+        larger_success=True,
+        chosen=LARGER,
+    )
+    return dataclasses.replace(choice, **changes)
+
+
+def test_hframe8_nests_in_the_current_limited_variant():
+    """The larger model is hframe-8 with one parameter more, I_max [A], held by default (a
+    data-sheet value) and built in."""
+    assert declaration("hframe-8").nests_in == LARGER
+    assert LARGER in EXTENDED_VARIANTS
+    names = build_model(LARGER).parameter_names
+    assert names == (*build_model("hframe-8").parameter_names, "I_max")
+    assert "I_max" in declaration(LARGER).fixed
+    assert declaration(LARGER).nests_in is None
+
+
+@pytest.mark.parametrize(
+    ("changes", "begins", "says"),
+    [
+        ({}, "hframe-8-current-limit kept: I_max = 7.5 A", "criterion -1500 against -1000"),
+        ({"chosen": "hframe-8", "larger_success": False}, "hframe-8 kept, the", "fit failed"),
+        (
+            {"chosen": "hframe-8", "criteria": {"hframe-8": -1000.0, LARGER: -1001.0}},
+            "hframe-8 kept, hframe-8-current-limit not better",
+            "95 % likelihood ratio",
+        ),
+        (
+            {"chosen": "hframe-8", "extra_relative_std": 0.5},
+            "hframe-8 kept, I_max poorly determined",
+            "relative std 0.5",
+        ),
+        (
+            {"start": None, "criteria": {}, "chosen": "hframe-8"},
+            "hframe-8-current-limit not tried",
+            "sensors' noise",
+        ),
+        ({"start": None, "chosen": "hframe-8"}, "hframe-8-current-limit not tried", "x/÷2"),
+    ],
+)
+def test_the_statement_says_what_decided(changes, begins, says):
+    """One sentence per outcome, naming the numbers that decided."""
+    statement = _choice(**changes).statement()
+    assert statement.startswith(begins)
+    assert says in statement
+
+
+def test_the_structure_option_is_checked():
+    with pytest.raises(OptionError, match="structure"):
+        FitOptions(structure="both")
+
+
+def test_a_fit_as_given_or_of_a_model_that_nests_in_none_is_left_alone(small_result, table):
+    """``structure="as-given"`` and a model without ``nests_in`` return the result itself."""
+    result = small_result()
+    as_given = FitOptions(structure="as-given").for_model("hframe-8")
+    assert with_structure_choice([], table, as_given, result, fit=None) is result
+    one_axis = load_parameter_file(models_dir() / "one-axis-table2.3.yaml")
+    options = FitOptions().for_model("one-axis")
+    assert with_structure_choice([], one_axis, options, result, fit=None) is result
+
+
+def test_the_larger_fit_frees_the_extra_parameter_and_does_not_choose_again():
+    """The larger fit: the smaller fit's free set (the model's default where none was named)
+    and I_max, its structure as given, no known points of the smaller model."""
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    options = larger_options(FitOptions(known_points=(table,)), "I_max")
+    assert options.free == ("default", "I_max")
+    assert options.structure == "as-given"
+    assert options.known_points == ()
+    named = larger_options(FitOptions(free=("k_l", "k_r")), "I_max")
+    assert named.free == ("k_l", "k_r", "I_max")
+
+
+def test_folds_refit_the_structure_kept(small_result, table):
+    """Cross-validation folds fit what the fit kept: the larger model from its start with
+    I_max free, or the start's model, neither choosing again."""
+    kept = small_result().with_diagnostics(structure=_choice())
+    start, options = refit_setup(kept, table, FitOptions())
+    assert start.variant == LARGER
+    assert "I_max" in options.free and options.structure == "as-given"
+    smaller = small_result().with_diagnostics(structure=_choice(chosen="hframe-8"))
+    start, options = refit_setup(smaller, table, FitOptions())
+    assert start is table and options.free is None and options.structure == "as-given"
+    assert math.isfinite(_choice().extra_value)
