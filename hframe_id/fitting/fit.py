@@ -50,7 +50,7 @@ from hframe_id.fitting.start_screen import (
     screen_start,
 )
 from hframe_id.fitting.stiffness_wall import at_the_wall
-from hframe_id.fitting.structure_choice import with_structure_choice
+from hframe_id.fitting.structure_choice import check_nesting, with_structure_choice
 from hframe_id.models import build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
@@ -83,6 +83,7 @@ def fit_recordings(
         valid samples, no recording that excites the model).
     """
     options = (options or FitOptions()).for_model(initial.variant)
+    check_nesting(initial.variant, options)
     _check_excitation(recordings, initial.variant)
     start = time.perf_counter()
     simulations = Simulations()

@@ -35,13 +35,14 @@ import math
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
+from hframe_id.errors import FitError
 from hframe_id.fitting.known_points import Criterion, replayed_starts
 from hframe_id.fitting.multistart import SPREAD
 from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import DEFAULT_FREE
 from hframe_id.fitting.progress import labelled, progress_sink
-from hframe_id.models import build_model, declaration
+from hframe_id.models import build_model, declaration, variants
 from hframe_id.parameters import ParameterSet, load_parameter_file
 
 if TYPE_CHECKING:  # the result holds a StructureChoice
@@ -112,14 +113,30 @@ class StructureChoice:
         return f"{self.asked} kept, {why} ({numbers})"
 
 
+def check_nesting(variant: str, options: FitOptions) -> None:
+    """Before any solving: ``FitError`` where ``variant`` nests in a model that cannot be fitted
+    in its place (``_extra_parameter``) and the fit would choose."""
+    larger = declaration(variant).nests_in
+    if options.structure == "choose" and larger is not None:
+        _extra_parameter(variant, larger)
+
+
 def _extra_parameter(asked: str, larger: str) -> str:
-    """The one parameter of ``larger`` that ``asked`` lacks."""
-    (extra,) = [
+    """The one parameter of ``larger`` that ``asked`` lacks; ``FitError`` naming what is wrong
+    where ``larger`` is not a registered model with a reference file and one parameter more."""
+    where = f"{declaration(asked).source}: nests_in {larger!r}"
+    if larger not in variants():
+        raise FitError(f"{where}: no such model (known: {', '.join(variants())})")
+    if declaration(larger).reference_file is None:
+        raise FitError(f"{where}: it declares no reference parameter file to start from")
+    extra = [
         name
         for name in declaration(larger).parameter_names
         if name not in declaration(asked).parameter_names
     ]
-    return extra
+    if len(extra) != 1:
+        raise FitError(f"{where}: it must have exactly one parameter more, has {extra}")
+    return extra[0]
 
 
 def _in_larger(params: ParameterSet, larger: str, extra: str, value: float) -> ParameterSet:

@@ -156,6 +156,7 @@ def declare(
     fixed: Sequence[str] = (),
     held: Sequence[str] = (),
     fit_defaults: Mapping[str, Any] | None = None,
+    nests_in: str | None = None,
 ) -> ModelDeclaration:
     """Declare a model by its energies (see the module docstring).
 
@@ -164,7 +165,9 @@ def declare(
     relative to the file that calls ``declare``; ``fixed`` and ``held`` are held in fits by
     default (measured constants, and values the outputs do not determine); ``fit_defaults``
     (``shooting_interval``, ``continuity``) are how ``hframe-id fit`` transcribes the model's
-    data by default.
+    data by default. ``nests_in`` names a registered model with one parameter more that holds
+    this one as a limit (as hframe-8-current-limit holds hframe-8): a fit tries it as well and
+    keeps the one the data choose (``hframe_id.fitting.structure_choice``).
     """
     caller = _caller_file()
     if reference is not None and not Path(reference).is_absolute():
@@ -183,6 +186,7 @@ def declare(
         fixed=tuple(fixed),
         held=tuple(held),
         fit_defaults=tuple(dict(fit_defaults or {}).items()),
+        nests_in=nests_in,
         source=str(caller) if caller else "<declare>",
     )
 

@@ -116,3 +116,23 @@ def test_folds_refit_the_structure_kept(small_result, table):
     start, options = refit_setup(smaller, table, FitOptions())
     assert start is table and options.free is None and options.structure == "as-given"
     assert math.isfinite(_choice().extra_value)
+
+
+@pytest.mark.parametrize(
+    ("nests_in", "says"),
+    [("no-such-model", "no such model"), ("one-axis", "it must have exactly one parameter more")],
+)
+def test_a_nesting_that_cannot_be_fitted_is_refused_before_any_work(monkeypatch, nests_in, says):
+    """A declared ``nests_in`` that names no model, or one that is not this one with one
+    parameter more: ``FitError`` naming the declaration, before the fit (a finished fit is
+    never lost to it); with the structure as given the fit goes on."""
+    from hframe_id.errors import FitError
+    from hframe_id.fitting.structure_choice import check_nesting
+    from hframe_id.models import register, registry
+
+    monkeypatch.setattr(registry, "_REGISTERED", dict(registry._REGISTERED))  # undone after
+    name = f"hframe-8-nesting-in-{nests_in}"
+    register(dataclasses.replace(declaration("hframe-8"), name=name, nests_in=nests_in))
+    with pytest.raises(FitError, match=f"nests_in '{nests_in}': {says}"):
+        check_nesting(name, FitOptions())
+    check_nesting(name, FitOptions(structure="as-given"))
