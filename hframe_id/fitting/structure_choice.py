@@ -67,6 +67,7 @@ class StructureChoice:
     extra_value, extra_relative_std : the larger fit's estimate [unit] and its relative std.
     larger_success : whether the larger fit succeeded.
     chosen : the variant kept.
+    failure : why the larger fit gave no result (it raised), else "".
     """
 
     asked: str
@@ -79,6 +80,7 @@ class StructureChoice:
     extra_relative_std: float = math.nan
     larger_success: bool = False
     chosen: str = ""
+    failure: str = ""
 
     @property
     def tried(self) -> bool:
@@ -96,6 +98,8 @@ class StructureChoice:
                 f"{self.larger} not tried: no {self.extra} within x/÷2 of its reference "
                 f"improved on {self.asked} at the start"
             )
+        if self.failure:
+            return f"{self.asked} kept: the {self.larger} fit {self.failure}"
         larger = self.criteria.get(self.larger, math.nan)
         numbers = (
             f"{self.extra} = {self.extra_value:.4g} {self.unit} (relative std "
@@ -199,7 +203,12 @@ def with_structure_choice(
     if start is None:
         choice = StructureChoice(asked, larger, extra, unit, None, criteria, chosen=asked)
         return _chosen(result, choice)
-    other = fit(recordings, start, larger_options(options, extra))
+    try:
+        other = fit(recordings, start, larger_options(options, extra))
+    except Exception as err:  # the smaller fit is finished: it stands, nothing is lost
+        failed = f"raised {type(err).__name__}: {err}"
+        choice = StructureChoice(asked, larger, extra, unit, start, criteria, chosen=asked)
+        return _chosen(result, replace(choice, failure=failed))
     criteria[larger] = criterion(other.parameters, (replayed_starts(other),))
     estimate = other.estimates[extra]
     keep = (

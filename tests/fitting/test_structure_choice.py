@@ -136,3 +136,28 @@ def test_a_nesting_that_cannot_be_fitted_is_refused_before_any_work(monkeypatch,
     with pytest.raises(FitError, match=f"nests_in '{nests_in}': {says}"):
         check_nesting(name, FitOptions())
     check_nesting(name, FitOptions(structure="as-given"))
+
+
+def test_a_larger_fit_that_raises_leaves_the_finished_fit_standing(monkeypatch, small_result):
+    """The hframe-8 fit is finished when the larger one starts: if that one raises, the
+    hframe-8 fit is kept, saying why (nothing finished is lost, no traceback)."""
+    from hframe_id.fitting import structure_choice
+    from hframe_id.fitting.noise_rounds import NoiseReport
+
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
+    result = small_result().with_diagnostics(noise=NoiseReport(rounds=2, channels={}))
+    monkeypatch.setattr(structure_choice.Criterion, "of", lambda *a, **k: lambda *a, **k: 0.0)
+    monkeypatch.setattr(structure_choice, "replayed_starts", lambda result: None)
+    monkeypatch.setattr(structure_choice, "_larger_start", lambda *a: limited)
+
+    def raising(recordings, start, options):
+        raise RuntimeError("integrator blew up")
+
+    options = FitOptions().for_model("hframe-8")
+    kept = with_structure_choice([], table, options, result, fit=raising)
+    assert kept.parameters is result.parameters and kept.success
+    assert kept.diagnostics.structure.chosen == "hframe-8"
+    assert kept.message.endswith(
+        "hframe-8 kept: the hframe-8-current-limit fit raised RuntimeError: integrator blew up"
+    )
