@@ -82,8 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         value = motor_angle_rms(free_run_residuals(result.parameters, training))
         rms.append(value if result.success else float("nan"))
         print(
-            f"start {k}: success={result.success} phi rms {value:.5g} rad, {wall:.1f} s; "
-            f"{result.message[:100]}",
+            f"start {k}: {result.variant} success={result.success} phi rms {value:.5g} rad, "
+            f"{wall:.1f} s; {result.message[:100]}",
             flush=True,
         )
     reached = reached_best(rms)
