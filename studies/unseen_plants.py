@@ -448,6 +448,7 @@ class UnseenTrial:
     held_out_rms_rad: tuple[float, float] = (math.nan, math.nan)
     error: TrialError | None = None
     travel_m: float = math.nan  # ``plant_travel_m`` over the training and held-out protocols
+    structure: str = ""  # the fit's ``StructureChoice.statement()`` (which model it kept, why)
 
     @property
     def within_travel(self) -> bool:
@@ -488,6 +489,8 @@ def record_fit(trial: UnseenTrial, result: FitResult, wall_time_s: float) -> Non
     trial.message = result.message[:MESSAGE_CHARS]
     trial.wall_time_s = wall_time_s
     trial.at_bound = tuple(name for name, est in result.estimates.items() if est.at_bound)
+    choice = result.diagnostics.structure
+    trial.structure = choice.statement() if choice else ""
 
 
 def judge(
@@ -618,6 +621,7 @@ def trial_line(t: UnseenTrial) -> str:
         f"{t.criterion[0]:.1f}/{t.criterion[1]:.1f}; phi rms fit/reduction "
         f"{t.held_out_rms_rad[0]:.2e}/{t.held_out_rms_rad[1]:.2e} rad; "
         f"at_bound=[{','.join(t.at_bound)}]{failed}; {t.message}"
+        + (f"\n{'':17s}structure: {t.structure}" if t.structure else "")
     )
 
 
