@@ -143,10 +143,13 @@ def _extra_parameter(asked: str, larger: str) -> str:
     return extra[0]
 
 
-def _in_larger(params: ParameterSet, larger: str, extra: str, value: float) -> ParameterSet:
-    """``params`` as a parameter set of ``larger`` with ``extra`` = ``value``."""
-    reference = load_parameter_file(declaration(larger).reference_file)
-    kept = {k: v for k, v in params.values.items() if k in build_model(larger).parameter_names}
+def _in_larger(
+    params: ParameterSet, reference: ParameterSet, extra: str, value: float
+) -> ParameterSet:
+    """``params`` as a parameter set of ``reference``'s (the larger) model, ``extra`` =
+    ``value``, the larger model's other parameters at ``reference``'s values."""
+    names = build_model(reference.variant).parameter_names
+    kept = {k: v for k, v in params.values.items() if k in names}
     return replace(
         reference.replace_values(**kept, **{extra: value}),
         title=f"{params.title}, {extra} from its profile",
@@ -158,11 +161,12 @@ def _larger_start(
     initial: ParameterSet, larger: str, extra: str, criterion: Criterion
 ) -> ParameterSet | None:
     """The larger model's start (step 1 of the module's doc), or None."""
-    reference = load_parameter_file(declaration(larger).reference_file).values[extra]
+    reference = load_parameter_file(declaration(larger).reference_file)
+    value = reference.values[extra]
     octaves = math.log2(SPREAD[1])
     steps = round(STEPS_PER_OCTAVE * octaves)
     candidates = [
-        _in_larger(initial, larger, extra, reference * 2.0 ** (k / STEPS_PER_OCTAVE))
+        _in_larger(initial, reference, extra, value * 2.0 ** (k / STEPS_PER_OCTAVE))
         for k in range(-steps, steps + 1)
     ]
     scores = [criterion(c) for c in candidates]
