@@ -136,6 +136,7 @@ def run_report(args: argparse.Namespace) -> int:
         flags_table,
         format_table,
         plot_histories,
+        structure_lines,
         summary,
         write_markdown,
     )
@@ -168,5 +169,7 @@ def run_report(args: argparse.Namespace) -> int:
         print(format_table(rows))
     else:
         print(f"no drift >= {100 * threshold:g} %")
+    for line in structure_lines(report["structure_changes"]):
+        print(line)
     print(f"report: {page} ({len(plots)} plots)")
     return 0

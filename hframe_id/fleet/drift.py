@@ -5,6 +5,13 @@ its most recent one. The change is latest / baseline - 1; it is flagged when
 |change| >= ``threshold`` and the 95 % interval of the difference, latest - baseline +/- 1.96
 sqrt(se_latest^2 + se_baseline^2), excludes zero (the two fits' errors are independent: they
 fit different recordings). A parameter not identified in either fit is never flagged.
+
+Only fits of one model are compared: where a fit chose the larger model its job's nests in
+(``fitted_model``: hframe-8-current-limit for an hframe-8 job whose records a current limit
+shapes), its shared parameters are not bent around the missing limit as the smaller model's
+are, so a change between the two is the structure's, not the rig's. A rig's drift is taken
+over the fits of its latest fit's model, and ``structure_changes`` names the rigs whose fits
+kept different models.
 """
 
 from __future__ import annotations
@@ -65,11 +72,33 @@ def _relative_change(baseline: float, latest: float) -> float:
     return float(latest / baseline - 1)
 
 
+def fitted_model(runs: pd.DataFrame) -> pd.Series:
+    """The model each fit kept: ``fitted_model``, or the job's ``model`` in a store written
+    before fits chose their structure."""
+    if "fitted_model" not in runs:
+        return runs["model"]
+    return runs["fitted_model"].fillna(runs["model"])
+
+
+def structure_changes(frame: pd.DataFrame) -> dict[str, list[str]]:
+    """Rig -> the models its successful fits kept, in run order, for every rig whose fits
+    kept more than one."""
+    changes = {}
+    for rig, runs in successful(frame).groupby("rig", sort=True):
+        models = list(dict.fromkeys(fitted_model(runs)))
+        if len(models) > 1:
+            changes[str(rig)] = models
+    return changes
+
+
 def drift_table(frame: pd.DataFrame, threshold: float = DEFAULT_THRESHOLD) -> list[Drift]:
-    """Every (rig, parameter) with at least two successful, identified runs."""
+    """Every (rig, parameter) with at least two successful, identified runs of the model the
+    rig's latest fit kept."""
     rows = []
     ok = successful(frame)
     for rig, runs in ok.groupby("rig", sort=True):
+        kept = fitted_model(runs)
+        runs = runs[kept == kept.iloc[-1]]
         for name, unit in parameters_of(ok):
             value, std = f"{name} [{unit}]", f"{name} std [{unit}]"
             identified = runs.get(f"{name} identified", pd.Series(True, index=runs.index))

@@ -98,9 +98,12 @@ def run_job(
 
 
 def result_columns(result: FitResult) -> dict[str, Any]:
-    """Estimate, std error, 95 % interval and identified flag of every free parameter, the
-    residual rms per channel and in noise std, cost, iterations and the solver's time."""
+    """The model the fit kept (``fitted_model``: the job's, or the larger one it nests in where
+    the data chose that, ``fitting.structure_choice``), estimate, std error, 95 % interval and
+    identified flag of every free parameter, the residual rms per channel and in noise std,
+    cost, iterations and the solver's time."""
     columns: dict[str, Any] = {
+        "fitted_model": result.variant,
         "cost": float(result.cost),
         "iterations": int(result.iterations),
         "fit_time [s]": float(result.wall_time_s),

@@ -14,7 +14,7 @@ from typing import Any
 import pandas as pd
 
 from hframe_id.atomic import Staging
-from hframe_id.fleet.drift import Drift, parameters_of, successful
+from hframe_id.fleet.drift import Drift, parameters_of, structure_changes, successful
 
 JSON_FORMAT_VERSION = "1.0"
 
@@ -103,6 +103,7 @@ def summary(
         "fits": len(frame),
         "by_status": {str(k): int(v) for k, v in frame["status"].value_counts().items()},
         "plots": str(plots),
+        "structure_changes": structure_changes(frame),
         "flagged": [
             {
                 "rig": d.rig,
@@ -117,6 +118,15 @@ def summary(
             if d.flagged
         ],
     }
+
+
+def structure_lines(changes: dict[str, list[str]]) -> list[str]:
+    """One line per rig whose fits kept different models (``drift.structure_changes``)."""
+    return [
+        f"{rig}: its fits kept {' then '.join(models)}; drift is judged over its "
+        f"{models[-1]} fits only"
+        for rig, models in changes.items()
+    ]
 
 
 def write_markdown(
@@ -141,6 +151,9 @@ def write_markdown(
         lines += ["| " + " | ".join(row) + " |" for row in rows[1:]]
     else:
         lines.append("No drift flagged.")
+    changes = structure_lines(report["structure_changes"])
+    if changes:
+        lines += ["", "## Structure", "", *(f"- {line}" for line in changes)]
     lines += ["", "## Histories", ""]
     for png in sorted(plots):
         lines.append(f"![{png.stem}]({png.parent.name}/{png.name})")

@@ -76,7 +76,9 @@ def test_batch_stores_a_row_per_fit(batch, fleet):
     assert frame["key"].is_unique
     assert {"k_l [N/m]", "k_l std [N/m]", "k_l ci95 low [N/m]", "k_l ci95 high [N/m]",
             "k_l identified", "rms x [m]", "residual_rms [noise std]", "wall_time [s]",
-            "fit_id", "recordings_sha256", "run_time", "worker"} <= set(frame.columns)  # fmt: skip
+            "fit_id", "recordings_sha256", "run_time", "worker",
+            "fitted_model"} <= set(frame.columns)  # fmt: skip
+    assert set(frame["fitted_model"]) == {"hframe-8"}  # sensor weights: no larger model tried
     assert frame["residual_rms [noise std]"].between(0.8, 1.2).all()  # a matched model
     for path in frame["parameter_file"]:
         assert Path(path).is_file() and Path(path).parent == fleet / "results-fits"
@@ -107,6 +109,7 @@ def test_report_flags_exactly_the_aged_rigs(batch, fleet, capsys):
         if abs(factor - 1) > DEFAULT_THRESHOLD
     }
     assert {(f["rig"], f["parameter"]) for f in report["flagged"]} == expected
+    assert report["structure_changes"] == {}
     for flag in report["flagged"]:
         # 30 % belt aging plus two weeks of 1 % scatter
         assert flag["change"] == pytest.approx(-0.3, abs=0.05)

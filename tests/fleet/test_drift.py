@@ -1,0 +1,71 @@
+"""Drift flags over a results frame (hframe_id.fleet.drift): fits of one model compared only."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from hframe_id.fleet.drift import drift_table, structure_changes
+from hframe_id.fleet.report import structure_lines
+
+LIMITED = "hframe-8-current-limit"
+
+
+def _row(rig: str, week: int, model: str, fitted: str | None, k_l: float, status: str = "ok"):
+    row = {
+        "rig": rig,
+        "run_time": pd.Timestamp("2026-01-05", tz="UTC") + pd.Timedelta(weeks=week),
+        "model": model,
+        "status": status,
+        "k_l [N/m]": k_l,
+        "k_l std [N/m]": 0.01 * k_l,  # 1 %: any 10 % change is significant
+        "k_l identified": True,
+    }
+    if fitted is not None:
+        row["fitted_model"] = fitted
+    return row
+
+
+def test_drift_is_judged_over_the_fits_of_the_latest_fits_model():
+    # rig-01: hframe-8 bent its belt around a missing current limit in week 0 (k_l 70),
+    # the limited model in weeks 1-2 holds the rig's unchanged 100: no drift, not -30 %.
+    frame = pd.DataFrame(
+        [
+            _row("rig-01", 0, "hframe-8", "hframe-8", 70.0),
+            _row("rig-01", 1, "hframe-8", LIMITED, 100.0),
+            _row("rig-01", 2, "hframe-8", LIMITED, 101.0),
+            _row("rig-02", 0, "hframe-8", "hframe-8", 100.0),
+            _row("rig-02", 2, "hframe-8", "hframe-8", 70.0),
+        ]
+    )
+    drifts = {(d.rig, d.parameter): d for d in drift_table(frame)}
+    assert drifts["rig-01", "k_l"].baseline == 100.0
+    assert drifts["rig-01", "k_l"].runs == 2
+    assert not drifts["rig-01", "k_l"].flagged
+    assert drifts["rig-02", "k_l"].flagged  # one model throughout: judged as before
+    assert structure_changes(frame) == {"rig-01": ["hframe-8", LIMITED]}
+    (line,) = structure_lines(structure_changes(frame))
+    assert line.startswith("rig-01: its fits kept hframe-8 then hframe-8-current-limit")
+
+
+def test_a_rig_with_one_fit_of_its_latest_model_is_not_judged():
+    frame = pd.DataFrame(
+        [
+            _row("rig-01", 0, "hframe-8", "hframe-8", 100.0),
+            _row("rig-01", 1, "hframe-8", LIMITED, 70.0),
+        ]
+    )
+    assert drift_table(frame) == []
+
+
+@pytest.mark.parametrize("with_column", [False, True])
+def test_a_store_without_the_fitted_model_compares_the_jobs_model(with_column):
+    # A store written before fits chose their structure has no ``fitted_model``; a failed
+    # row of a newer one has it empty.
+    rows = [_row("rig-01", 0, "hframe-8", None, 100.0), _row("rig-01", 1, "hframe-8", None, 70.0)]
+    frame = pd.DataFrame(rows)
+    if with_column:
+        frame["fitted_model"] = [None, "hframe-8"]
+    (drift,) = drift_table(frame)
+    assert drift.flagged and drift.change == pytest.approx(-0.3)
+    assert structure_changes(frame) == {}
