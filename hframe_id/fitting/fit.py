@@ -183,7 +183,7 @@ def _portfolio(
     results = [(draws[0][0], first)]
     for label, start in draws[1:]:
         named = replace(options, progress=labelled(progress, label)) if progress else options
-        results.append((label, _started_from(_fit_widening(recordings, start, named), initial)))
+        results.append((label, _fit_widening(recordings, start, named).started_from(initial)))
     outcomes = judged(results, Criterion.of(first, recordings))
     k = min(range(len(outcomes)), key=lambda i: outcomes[i].criterion)
     return results[k][1].with_diagnostics(starts=tuple(outcomes))
@@ -231,7 +231,7 @@ def _fit_widening(
         if may_widen and squarings >= widenings:
             may_widen = _zero_pending(result, options)
     if begin.parameters is not initial:
-        result = _started_from(result, initial)
+        result = result.started_from(initial)
         result = replace(result, message=f"{result.message}; {begin.statement}")
     if not (boxed and result.success):
         return result
@@ -279,7 +279,7 @@ def _off_the_wall(
             f"the stiffness wall (criterion {second.criterion:.6g} against {first.criterion:.6g})"
         )
         if second.criterion < first.criterion:
-            result = _started_from(again, result.initial)
+            result = again.started_from(result.initial)
         result = replace(result, message=f"{result.message}; {restarted}")
         names = _at_the_wall(result, recordings)
     if not names:
@@ -324,17 +324,6 @@ def _with_open_ends(result: FitResult, ends) -> FitResult:
     message = result.message.replace(at_bound_clause(at_bound), at_bound_clause(still))
     message += "; open-ended: " + "; ".join(end.statement() for end in ends)
     return replace(result, estimates=estimates, message=message)
-
-
-def _started_from(result: FitResult, initial: ParameterSet) -> FitResult:
-    """``result`` reporting ``initial`` as its start (a fit continued from a known point)."""
-    if result.initial is initial:
-        return result
-    estimates = {
-        name: replace(est, initial=float(initial.values[name]))
-        for name, est in result.estimates.items()
-    }
-    return replace(result, initial=initial, estimates=estimates)
 
 
 def _zero_pending(result: FitResult, options: FitOptions) -> bool:
@@ -413,7 +402,7 @@ def _never_worse_than_known(
         else [p for p in points[:1] if p.criterion < own - LIKELIHOOD_RATIO_95]
     )
     for point in tried:
-        again = _started_from(_fit_widening(recordings, point.parameters, options), initial)
+        again = _fit_widening(recordings, point.parameters, options).started_from(initial)
         continued = criterion(again.parameters, judged_starts(again)) if again.success else math.inf
         report = replace(report, continued={**report.continued, point.label: continued})
         if continued <= min(point.criterion, own) + LIKELIHOOD_RATIO_95:

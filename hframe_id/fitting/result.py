@@ -126,6 +126,17 @@ class FitResult:
         """This result with ``changes`` to its ``diagnostics`` (``FitDiagnostics`` fields)."""
         return replace(self, diagnostics=replace(self.diagnostics, **changes))
 
+    def started_from(self, initial: ParameterSet) -> FitResult:
+        """This result reporting ``initial`` as its start (a fit continued from a known
+        point reports the user's start)."""
+        if self.initial is initial:
+            return self
+        estimates = {
+            name: replace(est, initial=float(initial.values[name]))
+            for name, est in self.estimates.items()
+        }
+        return replace(self, initial=initial, estimates=estimates)
+
     @property
     def variant(self) -> str:
         """The model variant fitted."""

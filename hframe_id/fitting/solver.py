@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -185,6 +186,7 @@ class GaussNewton(CondensedModel):
         watchdog: bool = True,
         give_up: int | None = None,
         stall_defect_tol: float | None = None,
+        interrupt: Callable[[Evaluation, float], str | None] | None = None,
     ) -> StageReport:
         """Iterate one stage until converged; updates ``state`` in place.
 
@@ -206,6 +208,11 @@ class GaussNewton(CondensedModel):
         ``defect_tol`` (no such acceptance): defects of 2 estimated std let a discontinuous
         trajectory follow data its model cannot.
 
+        ``interrupt(evaluation, decrease)``, called after each accepted iteration of an exact
+        stage with the cost's decrease over the last ``settings.cost_window`` iterations
+        (once there are that many) and the defects below ``defect_tol``, ends the stage
+        (converged, at a point the merit accepted) with the message it returns, if any: a
+        caller whose cost is one of a sequence ends a stage once the next one gains more.
         """
         start = time.perf_counter()
         ms = self.ms
@@ -264,6 +271,11 @@ class GaussNewton(CondensedModel):
                 if penalty is None:
                     message += f", largest continuity defect {max_defect:.2g} noise std"
                 break
+            if interrupt and penalty is None and len(costs) > span and max_defect <= defect_tol:
+                stop = interrupt(ev, costs[-1 - span] - ev.cost)
+                if stop:
+                    converged, message = True, stop
+                    break
             if trial.step <= step_tol and trial.full_step and max_defect <= defect_tol:
                 converged = True
                 message = f"converged: parameter step {trial.step:.1e} <= {step_tol:.0e}"

@@ -71,6 +71,11 @@ class _Ended:
     success: bool = True
     message: str = "converged"
 
+    def started_from(self, initial):
+        """``FitResult.started_from`` where the start is the same (the stubs' only case)."""
+        assert initial is self.initial
+        return self
+
 
 def _wall_strategy(monkeypatch, table, restart_criterion, restart_at_wall):
     """``fit._off_the_wall`` with its fits and criterion stubbed: the first fit ends at

@@ -88,6 +88,7 @@ def test_the_rounds_end_at_a_round_that_ends_against_the_stiffness_wall(monkeypa
     round 2 (theta 2): the rounds stop there, round 2's point the fit, the levels reported
     as not settled; without the wall they run to ``max_noise_rounds``."""
     strategy = StrategySettings()
+    interrupted = []
 
     def fit(wall_at):
         stages = []
@@ -101,12 +102,14 @@ def test_the_rounds_end_at_a_round_that_ends_against_the_stiffness_wall(monkeypa
             against_the_wall=lambda theta: ("J_M1",) if theta[0] >= wall_at else (),
         )
         levels = iter(0.5**k for k in range(100))
+        interrupted.clear()
 
         def weighted(recordings, run, levels):
             run.problem.recording_std = levels
             return run
 
-        def solve(run, state, label):
+        def solve(run, state, label, sensor_std=None):
+            interrupted.append(sensor_std is not None)
             stages.append(SimpleNamespace(converged=True))
             return SimpleNamespace(theta=state.theta + 1.0), "solver"
 
@@ -120,3 +123,33 @@ def test_the_rounds_end_at_a_round_that_ends_against_the_stiffness_wall(monkeypa
     assert (rounds, state.theta[0], settling.settled) == (2, 2.0, False)
     _, state, _, rounds, _ = fit(wall_at=math.inf)
     assert rounds == strategy.max_noise_rounds == state.theta[0]
+    # Every round but the last may end early for re-weighting: the last runs to its tolerance.
+    assert interrupted == [True] * (rounds - 1) + [False]
+
+
+def test_the_reweighting_gain_is_the_majorisers_drop_at_the_new_levels():
+    """Recording 1 weighed at 0.01 rad with errors of 0.02: sum N [r^2 / (2 s^2) + ln s] drops
+    by N [(r/s)^2 / 2 - 1/2 - ln(r/s)] = 10 (2 - 0.5 - ln 2); x of recording 1 (errors 1e-4,
+    weighed at 1e-3, floored at 5e-4) by 10 [(0.1^2 - 0.2^2) / 2 + ln 2]; recording 2 weighed
+    at its own rms: nothing."""
+    errors = _errors([(0.02, 1e-4), STD[1]])
+    ms, state = _fit(errors, np.ones((4, 5, 2)))
+    expected = 10 * (2 - 0.5 - math.log(2)) + 10 * ((0.1**2 - 0.2**2) / 2 + math.log(2))
+    gain = noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR)
+    assert gain == pytest.approx(expected, rel=1e-12)
+    at_own = _errors([tuple(STD[0]), tuple(STD[1])])
+    ms, state = _fit(at_own, np.ones((4, 5, 2)))
+    assert noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR) == pytest.approx(0, abs=1e-9)
+
+
+def test_a_round_is_interrupted_once_reweighting_gains_more_than_it_and_than_the_resolution():
+    """The gain of the first test, 14.9 (above the 1.92 of the 95 % likelihood ratio):
+    interrupted after iterations that gained less, not after ones that gained more; a gain
+    below 1.92 never interrupts."""
+    ms, state = _fit(_errors([(0.02, 1e-4), STD[1]]), np.ones((4, 5, 2)))
+    interrupt = noise_rounds._reweighting_interrupt(ms, SENSOR)
+    assert interrupt(state.evaluation, 1.0).startswith("re-weighted: new levels lower")
+    assert interrupt(state.evaluation, 100.0) is None
+    ms, state = _fit(_errors([(0.0105, 1e-3), STD[1]]), np.ones((4, 5, 2)))
+    assert 0 < noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR) < 1.92
+    assert noise_rounds._reweighting_interrupt(ms, SENSOR)(state.evaluation, 0.0) is None

@@ -105,3 +105,26 @@ def test_sensitivities_that_overflow_once_weighted_print_no_numpy_warning(
         warnings.simplefilter("error")
         ev = ms.evaluate(nodes, np.zeros(len(problem.free)), problem.smoothing)
     assert not np.all(np.isfinite(ev.jac_theta))
+
+
+def test_an_interrupt_ends_an_exact_stage_with_its_message(shooting_setup):
+    """``GaussNewton.run``'s ``interrupt`` is asked after each accepted iteration once there
+    are ``cost_window`` of them, with the cost's decrease over the last ``cost_window``; what
+    it returns ends the stage, converged, at the last accepted point."""
+    problem, ms, nodes, _ = shooting_setup
+    window = GaussNewtonSettings.cost_window
+    asked = []
+
+    def interrupt(ev, decrease):
+        asked.append((ev.cost, decrease))
+        return "the next round gains more" if len(asked) == 2 else None
+
+    theta = np.full(ms.nf, 0.3)  # every free parameter x 1.35: a walk of many iterations
+    state = SolverState(nodes.copy(), theta, np.ones(ms.nf, dtype=bool))
+    gn = GaussNewton(ms)
+    report = gn.run(state, "exact", problem.smoothing, 100, 1e-12, 1e-3, interrupt=interrupt)
+    assert report.converged and report.message == "the next round gains more"
+    # Asked first after iteration ``window`` (at the earliest: only with the defects closed).
+    assert report.iterations >= window + 1
+    assert report.cost == asked[-1][0] == state.evaluation.cost
+    assert all(np.isfinite(decrease) for _, decrease in asked)

@@ -134,3 +134,24 @@ def test_statistics_of_sensitivities_too_large_to_square_do_not_raise():
     stats = compute_statistics(jac, residual, [block], 1, ("a", "b", "c"), "robust")
     assert np.all(np.isfinite(stats.relative_std[:2]))
     assert not stats.relative_std[2] < 1e6
+
+
+def test_statistics_of_a_parameter_with_almost_no_information_print_no_warning():
+    """A current limit that never binds has sensitivities of ~1e-150 (dev plant 8 of issue
+    25): its information, ~1e-300, inverts to an overflow. That parameter is undetermined,
+    the others not, and numpy prints nothing (a RuntimeWarning on the fit's terminal)."""
+    import warnings
+
+    from hframe_id.fitting.statistics import Block, compute_statistics
+
+    rng = np.random.default_rng(2)
+    jac = rng.normal(size=(200, 3))
+    # c: almost b's direction (1 - 1e-6), at 1e-150 of its size
+    jac[:, 2] = (0.999999 * jac[:, 1] + 1e-6 * jac[:, 2]) * 1e-150
+    residual = rng.normal(size=200)
+    block = Block("e:phi1", np.arange(200), 1.0, 0.0, np.zeros(200))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        stats = compute_statistics(jac, residual, [block], 0, ("a", "b", "c"), "robust")
+    assert np.isfinite(stats.relative_std[0])
+    assert not stats.relative_std[2] < 1e6

@@ -161,3 +161,53 @@ def test_a_larger_fit_that_raises_leaves_the_finished_fit_standing(monkeypatch, 
     assert kept.message.endswith(
         "hframe-8 kept: the hframe-8-current-limit fit raised RuntimeError: integrator blew up"
     )
+
+
+@pytest.mark.parametrize(("again_criterion", "kept_again"), [(-1200.0, True), (-1001.0, False)])
+def test_a_better_larger_fit_with_its_limit_undetermined_is_a_start_for_the_smaller(
+    monkeypatch, small_result, again_criterion, kept_again
+):
+    """The limited fit simulates the records better (-1500 against -1000) with I_max not
+    identified: hframe-8 is fitted again from its end (I_max dropped) and kept where that
+    fit is better than the first by more than the likelihood ratio (-1200), reported from the
+    user's start; not where it is within it (-1001)."""
+    from hframe_id.fitting import structure_choice
+    from hframe_id.fitting.noise_rounds import NoiseReport
+    from hframe_id.fitting.result import ParameterEstimate
+
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
+    first = small_result().with_diagnostics(noise=NoiseReport(rounds=2, channels={}))
+    idle = ParameterEstimate("I_max", "A", 8.0, 9.5, 1e24, (0.0, math.inf), False, True, 1e23)
+    larger = small_result(
+        parameters=limited.replace_values(k_l=11000.0, I_max=9.5),
+        estimates={**first.estimates, "I_max": idle},
+    )
+    again = small_result(parameters=table.replace_values(k_l=11500.0))
+    criteria = {id(first.parameters): -1000.0, id(larger.parameters): -1500.0}
+    criteria[id(again.parameters)] = again_criterion
+    monkeypatch.setattr(
+        structure_choice.Criterion, "of", lambda *a, **k: lambda p, *a, **k: criteria[id(p)]
+    )
+    monkeypatch.setattr(structure_choice, "replayed_starts", lambda result: None)
+    monkeypatch.setattr(structure_choice, "_larger_start", lambda *a: limited)
+    starts = []
+
+    def fit(recordings, start, options):
+        starts.append(start)
+        assert options.structure == "as-given"
+        return larger if start.variant == LARGER else dataclasses.replace(again, initial=start)
+
+    options = FitOptions().for_model("hframe-8")
+    kept = with_structure_choice([], table, options, first, fit=fit)
+    assert starts[1].variant == "hframe-8" and starts[1].values["k_l"] == 11000.0
+    choice = kept.diagnostics.structure
+    assert choice.chosen == "hframe-8"
+    if kept_again:
+        assert kept.parameters is again.parameters and kept.initial is table
+        assert choice.continued == -1200.0
+        assert "fitted again from the hframe-8-current-limit fit's end" in kept.message
+        assert "criterion -1200 against -1000 for the first hframe-8 fit" in kept.message
+    else:
+        assert kept.parameters is first.parameters and math.isnan(choice.continued)
+        assert "I_max poorly determined" in kept.message
