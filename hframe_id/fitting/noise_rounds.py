@@ -53,6 +53,8 @@ if TYPE_CHECKING:  # fit_run imports this module (through estimates)
     from hframe_id.fitting.fit_run import FitRun
 
 REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
+#: How a round that ended for re-weighting (``_reweighting_interrupt``) begins its message.
+REWEIGHTED = "re-weighted"
 
 
 @dataclass(frozen=True)
@@ -160,6 +162,9 @@ def estimate_noise(
     the strategy restarts off the wall (``fit._off_the_wall``) rather than weigh on there
     (each round at the wall integrates every window with ``max_substeps`` substeps).
 
+    Levels settled after a round that ended for re-weighting (``REWEIGHTED``) get one more
+    round, solved to its tolerance: the fit ends on a converged solve.
+
     A last round that stalls is rejected, as a trust region rejects a step: the fit is the
     last converged round's optimum (a real trajectory at its weights), marked by a
     ``REJECTED_ROUND_STAGE`` stage, with the levels reported as not settled. A round before
@@ -179,12 +184,15 @@ def estimate_noise(
     for rounds in range(first_round, strategy.max_noise_rounds + 1):
         levels = noise_levels(run.ms, state, sensor_std)
         change = _change(levels, run.problem.recording_std)
-        if rounds > 1 and change <= strategy.noise_rtol and stages[-1].converged:
+        settled = rounds > 1 and change <= strategy.noise_rtol and stages[-1].converged
+        if settled and not stages[-1].message.startswith(REWEIGHTED):
             rounds -= 1
             break
         run = _weighted(recordings, run, levels)
         label = _round_label(rounds, run.problem.output_names, levels)
-        last = rounds == strategy.max_noise_rounds
+        # Settled after a round that ended for re-weighting, or the last round allowed: one
+        # solved to its tolerance.
+        last = settled or rounds == strategy.max_noise_rounds
         state, gn = warm_solve(run, state, label, None if last else sensor_std)
         if stages[-1].converged:
             accepted = (run, state, gn, rounds)
@@ -265,7 +273,7 @@ def _reweighting_interrupt(ms: MultipleShooting, sensor_std: np.ndarray):
         gain = reweighting_gain(ms, ev, sensor_std)
         if gain > max(decrease, LIKELIHOOD_RATIO_95):
             return (
-                f"re-weighted: new levels lower the criterion by {gain:.4g}, more than the "
+                f"{REWEIGHTED}: new levels lower the criterion by {gain:.4g}, more than the "
                 f"last iterations did ({decrease:.4g})"
             )
         return None

@@ -153,3 +153,39 @@ def test_a_round_is_interrupted_once_reweighting_gains_more_than_it_and_than_the
     ms, state = _fit(_errors([(0.0105, 1e-3), STD[1]]), np.ones((4, 5, 2)))
     assert 0 < noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR) < 1.92
     assert noise_rounds._reweighting_interrupt(ms, SENSOR)(state.evaluation, 0.0) is None
+
+
+def test_levels_settled_after_a_reweighted_round_get_one_round_to_its_tolerance(monkeypatch):
+    """Rounds that may end for re-weighting do (message ``REWEIGHTED``); once the levels no
+    longer move, the fit does not end on such a round: one more, without the interrupt, then
+    the rounds stop (the fit ends on a solve converged to its tolerance)."""
+    strategy = StrategySettings()
+    stages, interrupted = [], []
+    run = SimpleNamespace(
+        options=SimpleNamespace(strategy=strategy),
+        stages=stages,
+        problem=SimpleNamespace(free=("J_M1",), output_names=("phi1",), recording_std=STD[:1, :1]),
+        ms=None,
+        against_the_wall=lambda theta: (),
+    )
+    levels = iter([0.02, 0.01, 0.01, 0.01, 0.01])
+
+    def weighted(recordings, run, levels):
+        run.problem.recording_std = levels
+        return run
+
+    def solve(run, state, label, sensor_std=None):
+        interrupted.append(sensor_std is not None)
+        ended = f"{noise_rounds.REWEIGHTED}: ..." if sensor_std is not None else "converged"
+        stages.append(SimpleNamespace(converged=True, message=ended))
+        return SimpleNamespace(theta=state.theta + 1.0), "solver"
+
+    monkeypatch.setattr(noise_rounds, "noise_levels", lambda *args: np.array([[next(levels)]]))
+    monkeypatch.setattr(noise_rounds, "_weighted", weighted)
+    monkeypatch.setattr(noise_rounds, "warm_solve", solve)
+    start = SimpleNamespace(theta=np.zeros(1))
+    _, _, _, rounds, settling = noise_rounds.estimate_noise(run, start, [], SENSOR[:1])
+    # round 1 at 0.02 (re-weighted), round 2 at 0.01 (re-weighted), round 3: settled after a
+    # re-weighted round, to its tolerance; then settled after a converged one: the end.
+    assert interrupted == [True, True, False]
+    assert rounds == 3 and settling.settled
