@@ -208,11 +208,8 @@ class GaussNewton(CondensedModel):
         ``defect_tol`` (no such acceptance): defects of 2 estimated std let a discontinuous
         trajectory follow data its model cannot.
 
-        ``interrupt(evaluation, decrease)``, called after each accepted iteration of an exact
-        stage with the cost's decrease over the last ``settings.cost_window`` iterations
-        (once there are that many) and the defects below ``defect_tol``, ends the stage
-        (converged, at a point the merit accepted) with the message it returns, if any: a
-        caller whose cost is one of a sequence ends a stage once the next one gains more.
+        ``interrupt(evaluation, decrease over the last cost_window)``, asked in exact stages
+        with the defects at ``defect_tol``, ends the stage, converged, with its message if any.
         """
         start = time.perf_counter()
         ms = self.ms
@@ -271,11 +268,10 @@ class GaussNewton(CondensedModel):
                 if penalty is None:
                     message += f", largest continuity defect {max_defect:.2g} noise std"
                 break
-            if interrupt and penalty is None and len(costs) > span and max_defect <= defect_tol:
-                stop = interrupt(ev, costs[-1 - span] - ev.cost)
-                if stop:
-                    converged, message = True, stop
-                    break
+            asked = interrupt and penalty is None and len(costs) > span and max_defect <= defect_tol
+            if asked and (stop := interrupt(ev, costs[-1 - span] - ev.cost)):
+                converged, message = True, stop
+                break
             if trial.step <= step_tol and trial.full_step and max_defect <= defect_tol:
                 converged = True
                 message = f"converged: parameter step {trial.step:.1e} <= {step_tol:.0e}"

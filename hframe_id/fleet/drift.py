@@ -74,10 +74,11 @@ def _relative_change(baseline: float, latest: float) -> float:
 
 def fitted_model(runs: pd.DataFrame) -> pd.Series:
     """The model each fit kept: ``fitted_model``, or the job's ``model`` in a store written
-    before fits chose their structure."""
+    before fits chose their structure ("" in a frame with neither)."""
+    job = runs["model"] if "model" in runs else pd.Series("", index=runs.index)
     if "fitted_model" not in runs:
-        return runs["model"]
-    return runs["fitted_model"].fillna(runs["model"])
+        return job
+    return runs["fitted_model"].fillna(job)
 
 
 def structure_changes(frame: pd.DataFrame) -> dict[str, list[str]]:
