@@ -16,6 +16,7 @@ kept different models.
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from dataclasses import asdict, dataclass
@@ -82,11 +83,12 @@ def fitted_model(runs: pd.DataFrame) -> pd.Series:
 
 
 def structure_changes(frame: pd.DataFrame) -> dict[str, list[str]]:
-    """Rig -> the models its successful fits kept, in run order, for every rig whose fits
-    kept more than one."""
+    """Rig -> the models its successful fits kept, in run order with repeats in a row
+    collapsed (the last: the latest fit's, whose fits the drift compares), for every rig
+    whose fits kept more than one."""
     changes = {}
     for rig, runs in successful(frame).groupby("rig", sort=True):
-        models = list(dict.fromkeys(fitted_model(runs)))
+        models = [model for model, _ in itertools.groupby(fitted_model(runs))]
         if len(models) > 1:
             changes[str(rig)] = models
     return changes

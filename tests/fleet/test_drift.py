@@ -69,3 +69,20 @@ def test_a_store_without_the_fitted_model_compares_the_jobs_model(with_column):
     (drift,) = drift_table(frame)
     assert drift.flagged and drift.change == pytest.approx(-0.3)
     assert structure_changes(frame) == {}
+
+
+def test_a_rig_back_on_its_first_model_is_judged_over_that_models_fits():
+    """hframe-8, then the limited model, then hframe-8 again: the drift compares the two
+    hframe-8 fits, and the structure line ends with hframe-8 (the latest fit's model)."""
+    frame = pd.DataFrame(
+        [
+            _row("rig-01", 0, "hframe-8", "hframe-8", 100.0),
+            _row("rig-01", 1, "hframe-8", LIMITED, 60.0),
+            _row("rig-01", 2, "hframe-8", "hframe-8", 101.0),
+        ]
+    )
+    (drift,) = drift_table(frame)
+    assert (drift.baseline, drift.latest, drift.runs) == (100.0, 101.0, 2)
+    assert structure_changes(frame) == {"rig-01": ["hframe-8", LIMITED, "hframe-8"]}
+    (line,) = structure_lines(structure_changes(frame))
+    assert line.endswith("drift is judged over its hframe-8 fits only")
