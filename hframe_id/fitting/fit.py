@@ -6,9 +6,10 @@ The chain (PyBOP-style plain objects): recordings -> :class:`FitProblem` (checke
 box of bounds is :func:`hframe_id.fitting.local_fit.fit_in_box` (its stages); this module
 is the strategy around it, what makes a success mean the parameters are right:
 
-1. the box: a fit that ends on its default box (drawn around the start) is repeated with the
-   box opened (friction down to zero first), and a parameter still on it is either one the
-   data bound on one side only (``open_ended``) or a failure saying the box decided;
+1. the box: a fit that ends on its default box (drawn around the start) goes on with the
+   box opened (``box_opening``: friction down to zero first), and a parameter still on it is
+   either one the data bound on one side only (``open_ended``) or a failure saying the box
+   decided;
 2. known points: the fit is judged against every point it knows (the start, the
    equation-error estimate, the model's reference files, the user's) by the criterion of its
    written file, and continues from a better one (``known_points``);
@@ -27,6 +28,7 @@ from dataclasses import replace
 import numpy as np
 
 from hframe_id.errors import FitError
+from hframe_id.fitting.box_opening import BoxOpening
 from hframe_id.fitting.dataset import Dataset, check_excitation
 from hframe_id.fitting.estimates import at_bound_clause
 from hframe_id.fitting.known_points import (
@@ -133,7 +135,9 @@ def _explaining_the_data(
     shared through ``simulations``) in its known-points report, and failed if it succeeded
     without that replay simulating the records better than the model-free prediction that
     nothing moves (``known_points.held_criterion``: each channel held at its mean) by more than
-    ``LIKELIHOOD_RATIO_95`` (a failed fit says so of the point it ended at). A fit of records
+    ``LIKELIHOOD_RATIO_95`` (a failed fit says so of the point it ended at), both under the
+    fit's noise levels (``known_points.Criterion.against_held``: a channel held still by
+    friction counts against the model by at most N / 2). A fit of records
     whose inputs do not drive what the outputs show (a red-team record with its voltages
     zeroed and its motion kept) ended "success", every parameter not identified; judged from
     its own estimated initial states it still did (belts started stretched move the model
@@ -141,16 +145,17 @@ def _explaining_the_data(
     was worse than nothing moving (-1,314 against -1,683:
     docs/studies/2026-11-26-replayed-verdict.md)."""
     criterion = Criterion.of(result, recordings, simulations)
-    replayed = criterion(result.parameters, (replayed_starts(result),))
+    starts = replayed_starts(result)
+    replayed = criterion(result.parameters, (starts,))
     report = replace(result.diagnostics.known_points, replayed=replayed)
     result = result.with_diagnostics(known_points=report)
-    held = criterion.held(result.parameters.variant)
-    if replayed < held - LIKELIHOOD_RATIO_95:
+    model, held = criterion.against_held(result.parameters, starts)
+    if model < held - LIKELIHOOD_RATIO_95:
         return result
     why = (
         f"simulated from the records' start as validate replays it is no closer to them than "
-        f"every channel held still ({criterion.name}: {replayed:.6g} against {held:.6g}); the "
-        "inputs do not drive what the outputs show under this model"
+        f"every channel held still (chi^2 / 2 under the fit's noise levels: {model:.6g} "
+        f"against {held:.6g}); the inputs do not drive what the outputs show under this model"
     )
     if not result.success:  # said of the point it ended at too
         return replace(result, message=f"{result.message}; it explains none of the data: {why}")
@@ -192,47 +197,37 @@ def _portfolio(
 def _fit_widening(
     recordings, initial: ParameterSet, options: FitOptions, judge: Criterion | None = None
 ) -> FitResult:
-    """The fit within the default box, repeated from ``initial`` while it ends on it
-    (``StrategySettings.box_widenings`` times): once a nonnegative parameter ends on its
-    log-scale lower bound every free nonnegative one reaches 0 (``FitOptions.zero_reachable``:
-    friction terms trade against each other, one at a time would take a fit per term), any other
-    on the box widens it (bound factor squared, ``box_widenings`` times: opening friction to
-    zero does not use one up; before, test plant 1034's M_cart got x/÷100, not 1e4, because
-    friction had been opened first). Still on the box after that, a failure saying so.
+    """The fit within the default box, the box opened while it ends on it
+    (``box_opening.BoxOpening``). A fit that ends on the box after its noise rounds
+    continues from its end in the opened box (``local_fit.OpenedBox``); one whose first solve
+    ends on it returns before the rounds and is repeated here, in the opened box. Still on the
+    box with nothing left to open: open-ended parameters (``open_ended``), or a failure saying
+    the box decided.
 
     ``judge``: ``initial`` is the start screen's point (``start_screen``, its criterion);
-    a widened fit then begins from where the last one ended on the box if the judge finds
+    a repeated fit then begins from where the last one ended on the box if the judge finds
     that better (``start_screen.Beginning``), else from ``initial`` again. (Restarting from
     the last end unjudged was measured worse: the linear hframe-20 plant then ended with
     F_c_bridge on the box, 1.53 x the reduction's training cost, in 77 s against 36 s.
     Restarting from ``initial`` always lost a first fit that had found the rig: the shipped
     2 V steps began from the equation-error estimate, ended with B_M1 on its box at the
     rig's value, and the refits from there ended at a wrong optimum, docs/studies/.)"""
-    squarings = 0
-    widenings = options.strategy.box_widenings
-    may_widen = True
+    box = BoxOpening.of(options)
     begin = Beginning(initial)
     while True:
-        result = fit_in_box(
-            recordings, begin.parameters, options, may_widen=may_widen, screened=bool(judge)
-        )
-        boxed = result.diagnostics.at_default_box
-        if not (boxed and may_widen):
+        result = fit_in_box(recordings, begin.parameters, options, box, screened=bool(judge))
+        opened = box.opened(result.options, result)
+        if opened is None:
             break
         if judge:
             begin = begin.or_better(result.parameters, judge)
-        widened = _widened(options, result, boxed, squarings < widenings)
-        # Nothing left to open: the fit again, whole (a fit that may widen stops before
-        # its noise rounds once it ends on the box), to be judged.
-        opened = (widened.bound_factor, widened.zero_reachable)
-        may_widen = opened != (options.bound_factor, options.zero_reachable)
-        squarings += widened.bound_factor != options.bound_factor
-        options = widened
-        if may_widen and squarings >= widenings:
-            may_widen = _zero_pending(result, options)
+        options = replace(
+            options, bound_factor=opened.bound_factor, zero_reachable=opened.zero_reachable
+        )
     if begin.parameters is not initial:
         result = result.started_from(initial)
         result = replace(result, message=f"{result.message}; {begin.statement}")
+    boxed = result.diagnostics.at_default_box
     if not (boxed and result.success):
         return result
     ends = open_ends(result, recordings, boxed)
@@ -242,9 +237,9 @@ def _fit_widening(
         result,
         success=False,
         message=f"the default box decided the answer: {', '.join(boxed)} ended on a "
-        f"bound of x/÷{options.bound_factor:g} of the start after {squarings} "
-        "widenings (the data push them further: a start closer to the rig, or "
-        "--bounds, decides instead; "
+        f"bound of x/÷{result.options.bound_factor:g} of the start after "
+        f"{box.squarings(result.options)} widenings (the data push them further: a start "
+        "closer to the rig, or --bounds, decides instead; "
         + "; ".join(end.statement() for end in ends)
         + "); "
         + result.message,
@@ -324,38 +319,6 @@ def _with_open_ends(result: FitResult, ends) -> FitResult:
     message = result.message.replace(at_bound_clause(at_bound), at_bound_clause(still))
     message += "; open-ended: " + "; ".join(end.statement() for end in ends)
     return replace(result, estimates=estimates, message=message)
-
-
-def _zero_pending(result: FitResult, options: FitOptions) -> bool:
-    """Whether some free nonnegative parameter of ``result`` cannot reach 0 under
-    ``options`` yet (friction not opened to zero)."""
-    kinds = {spec.name: spec.kind for spec in result.problem.model.parameters}
-    return any(
-        kinds[n] == "nonnegative" and n not in options.zero_reachable
-        for n in result.problem.free_names
-    )
-
-
-def _widened(
-    options: FitOptions, result: FitResult, boxed: tuple[str, ...], square: bool
-) -> FitOptions:
-    """``options`` with the default box opened for the ``boxed`` parameters of ``result``: a
-    nonnegative one below its start makes every free nonnegative parameter reach 0, any
-    other widens the bound factor (if ``square``)."""
-    kinds = {spec.name: spec.kind for spec in result.problem.model.parameters}
-    friction = [n for n in result.problem.free_names if kinds[n] == "nonnegative"]
-    to_zero = [
-        n
-        for n in boxed
-        if n in friction and result.estimates[n].estimate < result.estimates[n].initial
-    ]
-    widen = set(boxed) - set(to_zero)
-    zero = tuple(dict.fromkeys(options.zero_reachable + (tuple(friction) if to_zero else ())))
-    return replace(
-        options,
-        zero_reachable=zero,
-        bound_factor=options.bound_factor**2 if widen and square else options.bound_factor,
-    )
 
 
 def _known_candidates(initial: ParameterSet, options: FitOptions, result, screen):

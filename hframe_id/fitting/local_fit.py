@@ -38,6 +38,7 @@ from typing import Protocol
 
 import numpy as np
 
+from hframe_id.fitting.box_opening import OPENED_BOX_STAGE, BoxOpening, opened_box_report
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.held_uncertainty import include_held_uncertainty
@@ -47,6 +48,7 @@ from hframe_id.fitting.noise_rounds import (
     estimate_noise,
     noise_report,
     unweighted_residuals,
+    warm_solve,
 )
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.output_error import DEFERRED_STAGE, solve
@@ -70,15 +72,17 @@ def fit_in_box(
     recordings: list[Recording],
     initial: ParameterSet,
     options: FitOptions,
-    may_widen: bool = False,
+    box: BoxOpening | None = None,
     screened: bool = False,
 ) -> FitResult:
     """``fit_recordings`` within the box of ``options`` (its bounds and bound factor): the
     stages of ``strategy`` in order, then the judgements of the end (``_finished``). With
-    ``may_widen``, a first solve that ends on the default box returns before the noise
-    rounds (the box will be opened and the fit repeated: measured on the lubricated plant of
-    issue 25, the rounds took 25 of the 27 s of a fit whose six friction terms ended on the
-    box after the first solve and stayed there). ``screened``: ``initial`` is the start
+    ``box`` (how far the default box may open), a first solve that ends on the default box
+    returns before the noise rounds where ``box`` opens it (the fit is repeated in the opened
+    box: measured on the lubricated plant of issue 25, the rounds took 25 of the 27 s of a
+    fit whose six friction terms ended on the box after the first solve and stayed there),
+    and a fit that ends on it after the rounds goes on in the opened box (:class:`OpenedBox`).
+    ``screened``: ``initial`` is the start
     screen's choice (``start_screen``), which judged the equation-error estimate already, by
     the criterion the fit is judged by: the stages begin from ``initial`` as it is.
     A stage that ends against the stiffness wall ends the fit there: ``max_substeps``
@@ -87,7 +91,7 @@ def fit_in_box(
     ``max_substeps`` substeps."""
     run = _started_run(recordings, initial, options, regress=not screened)
     at = Standing(run, recordings, run.problem.channel_std.copy())
-    for stage in strategy(run, may_widen):
+    for stage in strategy(run, box):
         at = stage(at)
         if at.ended is not None:
             return at.ended
@@ -120,21 +124,23 @@ class Stage(Protocol):
     def __call__(self, at: Standing) -> Standing: ...
 
 
-def strategy(run: FitRun, may_widen: bool) -> tuple[Stage, ...]:
+def strategy(run: FitRun, box: BoxOpening | None) -> tuple[Stage, ...]:
     """The stages of a fit in one box, in order (module docstring). A model with a
     coordinate no output measures (one-axis: the idler) first attempts the fit with its
     node states estimated at the parameters held (converges from the truth on fresh plants,
     where the path from the measured nodes left it), then from the measured nodes (which fits
     the shipped pulses from Table 2.3, where the pre-pass path stalled), and restarts along
-    the springs that hold it; ``may_widen`` stops a fit on the default box before the
-    noise rounds (``fit._fit_widening`` opens the box)."""
+    the springs that hold it; with ``box``, a fit on the default box stops before the noise
+    rounds (``fit._fit_widening`` repeats it in the opened box) or, ending on it after
+    them, goes on in the opened box."""
     unmeasured = bool(unmeasured_coordinates(run.ms)) and run.options.state_prepass
     return (
         Attempts((True, False) if unmeasured else (False,)),
         *((UnmeasuredRestarts(),) if unmeasured else ()),
-        *((OnTheBox(),) if may_widen else ()),
+        *((OnTheBox(box),) if box else ()),
         NoiseLevels(),
         ReplayedRest(),
+        *((OpenedBox(box),) if box else ()),
     )
 
 
@@ -161,13 +167,16 @@ class UnmeasuredRestarts:
         return replace(at, best=restarts_along_unmeasured_springs(at.run, at.best))
 
 
+@dataclass(frozen=True)
 class OnTheBox:
-    """Ends the fit where its end lies on the default box (to be opened and the fit
-    repeated)."""
+    """Ends the fit where its end lies on the default box and ``box`` opens it (the fit is
+    repeated in the opened box)."""
+
+    box: BoxOpening
 
     def __call__(self, at: Standing) -> Standing:
         result = at.run.result(at.best)
-        return replace(at, ended=result) if result.diagnostics.at_default_box else at
+        return replace(at, ended=result) if self.box.opened(at.run.options, result) else at
 
 
 class NoiseLevels:
@@ -192,12 +201,17 @@ class NoiseLevels:
 class ReplayedRest:
     """The last solve, from the replay's rest state (``replayed_rest``), after a converged
     stage; where its end is kept and the levels were estimated, the noise rounds go on from
-    it (the levels of the point the fit reports)."""
+    it (the levels of the point the fit reports). With rounds to follow, the solve is one:
+    it ends once re-weighting gains more (on dev plant 57 of issue 25 it ran 51 of the first
+    fit's 101 s to its tolerance, and the levels it was solved at then moved by 2 x)."""
 
     def __call__(self, at: Standing) -> Standing:
         if not (at.run.stages[-1].converged and replays_rest(at.run)):
             return at
-        run, best = solve_from_replayed_rest(at.run, at.best, at.recordings)
+        rounds_follow = 0 < at.rounds < at.run.options.strategy.max_noise_rounds
+        run, best = solve_from_replayed_rest(
+            at.run, at.best, at.recordings, at.rounds > 0, at.sensor_std if rounds_follow else None
+        )
         at = replace(at, run=run, best=best)
         if not (at.rounds and run.options.rest_start == "replay"):
             return at
@@ -207,6 +221,49 @@ class ReplayedRest:
         if state is not best.state:
             best = Fitted(state, gn, run.statistics(gn, state), best.held)
         return replace(at, run=run, best=best, rounds=rounds, settling=settling)
+
+
+@dataclass(frozen=True)
+class OpenedBox:
+    """A fit that ends on the default box after its noise rounds goes on from its end, at
+    its noise levels, in the box ``box`` opens, until it ends off the box or nothing is left
+    to open: the same problem with wider bounds (friction in linear scale where it opens to
+    zero), the rounds continued from the levels reached, then the last solve from the
+    replay's rest state if it has not run. Repeating the whole fit in the opened box ran its
+    rounds again from the sensors' weights: on the slow class of issue 25 (friction 3.4 x,
+    the box opened twice) three fits of hframe-8 in 659 s, each with its rounds and a solve
+    from rest of 14-89 s (docs/studies/)."""
+
+    box: BoxOpening
+
+    def __call__(self, at: Standing) -> Standing:
+        while True:
+            result = at.run.result(at.best)
+            options = self.box.opened(at.run.options, result)
+            if options is None or at.run.against_the_wall(at.best.state.theta):
+                return at
+            at = ReplayedRest()(_continued_in(options, at, result))
+
+
+def _continued_in(options: FitOptions, at: Standing, ended: FitResult) -> Standing:
+    """Where the fit stands after going on from ``ended`` (``at``'s end) in the box of
+    ``options``: the rounds continued at its levels (a solve at the sensors' weights if they
+    were not estimated), a stage recording the box it opened first."""
+    problem = build_problem(at.recordings, at.run.problem.initial, options)
+    ms = MultipleShooting(problem, transcription=options.transcription_options)
+    run = replace(at.run, problem=problem, ms=ms, options=options)
+    state = replace(
+        at.best.state,
+        theta=problem.theta_of(ended.parameters),
+        active=np.ones(len(problem.free), dtype=bool),
+    )
+    run.stages.append(opened_box_report(ended, at.run.options, options))
+    if not at.rounds:
+        state, gn = warm_solve(run, state, OPENED_BOX_STAGE)
+        return replace(at, run=run, best=Fitted(state, gn, run.statistics(gn, state)))
+    run, state, gn, rounds, settling = estimate_noise(run, state, at.recordings, at.sensor_std)
+    best = Fitted(state, gn, run.statistics(gn, state))
+    return replace(at, run=run, best=best, rounds=rounds, settling=settling)
 
 
 def _finished(at: Standing) -> FitResult:

@@ -23,16 +23,17 @@ docs/studies/).
 
 Each round is a solve at fixed levels, warm-started from the last; the rounds stop once no
 level at a round's end differs from the levels it was solved at by more than
-``StrategySettings.noise_rtol``. A round only has to lower the majoriser, not minimise it: it ends
-once re-estimating the levels would lower the majoriser more than its last
-``GaussNewtonSettings.cost_window`` iterations did, and by more than the statistical resolution
-(``reweighting_gain``, ``_reweighting_interrupt``); the last round allowed runs to its
-tolerance. Solved to their tolerance, the realistic plant's first two rounds crawled for 150
-iterations each (trust region 5e-3, the cost down by 0.3-1 per iteration of 6,600) and its fit took
-120 s; so, 46 s (2026-11-28, docs/studies/). (Re-setting the levels within a round's solve whenever
-one moved by 5 %, a rule with no measure of what either move gains, let a channel that fits badly
-lower its own weight as it goes: dev plant 10 ended with phi levels of 0.5 rad, a wrong fit called
-a success. Measured 2026-11-26, docs/studies/.)
+``StrategySettings.noise_rtol``. A round only has to lower the majoriser, not minimise it: it
+ends once its last ``GaussNewtonSettings.cost_window`` iterations lowered the majoriser by less
+than re-estimating the levels would (``reweighting_gain``), the last round allowed and one after
+the levels settled excepted; and every round ends, converged, once they lowered it by less than
+the statistical resolution (``_round_interrupt``). Solved to their tolerance, the realistic
+plant's first two rounds crawled for 150 iterations each (trust region 5e-3, the cost down by
+0.3-1 per iteration of 6,600) and its fit took 120 s; so, 46 s (2026-11-28, docs/studies/).
+(Re-setting the levels within a round's solve whenever one moved by 5 %, a rule with no measure
+of what either move gains, let a channel that fits badly lower its own weight as it goes: dev
+plant 10 ended with phi levels of 0.5 rad, a wrong fit called a success. Measured 2026-11-26,
+docs/studies/.)
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ if TYPE_CHECKING:  # fit_run imports this module (through estimates)
     from hframe_id.fitting.fit_run import FitRun
 
 REJECTED_ROUND_STAGE = "noise rounds: the stalled last round rejected"
-#: How a round that ended for re-weighting (``_reweighting_interrupt``) begins its message.
+#: How a round that ended for re-weighting (``_round_interrupt``) begins its message.
 REWEIGHTED = "re-weighted"
 
 
@@ -193,7 +194,7 @@ def estimate_noise(
         # Settled after a round that ended for re-weighting, or the last round allowed: one
         # solved to its tolerance.
         last = settled or rounds == strategy.max_noise_rounds
-        state, gn = warm_solve(run, state, label, None if last else sensor_std)
+        state, gn = warm_solve(run, state, label, True, None if last else sensor_std)
         if stages[-1].converged:
             accepted = (run, state, gn, rounds)
         if run.against_the_wall(state.theta):
@@ -260,18 +261,29 @@ def reweighting_gain(ms: MultipleShooting, ev: Evaluation, sensor_std: np.ndarra
     return majoriser(ms.problem.recording_std) - majoriser(_levels_at(ms, ev, sensor_std))
 
 
-def _reweighting_interrupt(ms: MultipleShooting, sensor_std: np.ndarray):
-    """A round's ``GaussNewton.run`` interrupt: stop once re-estimating the levels would
-    lower the majoriser more than the round's last iterations did, and by more than the
-    statistical resolution (``LIKELIHOOD_RATIO_95``: below it the round runs to its
-    tolerance, so the rounds end on a converged solve). The rounds are a majorise-minimise
-    iteration: each only has to lower the majoriser, and one crawling along a valley at
-    fixed levels (the realistic plant's first rounds: 150 iterations, 0.3-1 per iteration
-    of 6,600) spends its time where the next levels gain more."""
+def _round_interrupt(ms: MultipleShooting, sensor_std: np.ndarray | None):
+    """A round's ``GaussNewton.run`` interrupt. It ends the round, converged, once its last
+    iterations lowered the majoriser by less than the statistical resolution
+    (``LIKELIHOOD_RATIO_95``: a likelihood-ratio test at 95 %; the tolerance 1e-6 relative of
+    the other stages is 0.01-0.1 of it here, and a crawl below it changes no rms the fit
+    reports by more than 1e-3 relative); with the sensors' std ``sensor_std`` [SI] (another
+    round may follow), also once they lowered it by less than re-estimating the levels would
+    (``reweighting_gain``; message ``REWEIGHTED``). The rounds are a majorise-minimise
+    iteration: each only has to lower the majoriser, and one crawling along a valley at fixed
+    levels spends its time where the next levels gain more, or where nothing the data can tell
+    is gained (the realistic plant's first rounds: 150 iterations, 0.3-1 per iteration of
+    6,600; dev plant 57's limited fit: a last round at 2 s and 0.03 per iteration)."""
 
     def interrupt(ev: Evaluation, decrease: float) -> str | None:
+        if decrease < LIKELIHOOD_RATIO_95:
+            return (
+                f"converged: the last iterations lowered the criterion by {decrease:.4g}, less "
+                f"than the statistical resolution {LIKELIHOOD_RATIO_95}"
+            )
+        if sensor_std is None:
+            return None
         gain = reweighting_gain(ms, ev, sensor_std)
-        if gain > max(decrease, LIKELIHOOD_RATIO_95):
+        if gain > decrease:
             return (
                 f"{REWEIGHTED}: new levels lower the criterion by {gain:.4g}, more than the "
                 f"last iterations did ({decrease:.4g})"
@@ -308,14 +320,21 @@ def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageR
     )
 
 
-def warm_solve(run: FitRun, start: SolverState, label: str, sensor_std: np.ndarray | None = None):
+def warm_solve(
+    run: FitRun,
+    start: SolverState,
+    label: str,
+    estimated: bool = False,
+    sensor_std: np.ndarray | None = None,
+):
     """Every window of ``run``'s transcription, exact continuity, from ``start``'s nodes and
     parameters, monotone (no step may raise the merit: a warm start is kept, not thrown
     away by free steps), its stage ``label`` appended to ``run.stages``. With estimated
     levels a stall counts as converged only with its defects at ``defect_tol`` (or closed
-    by simulation), see ``GaussNewton.run``. A noise round that another may follow passes
-    the sensors' std ``sensor_std`` [SI]: it ends once re-weighting gains more
-    (``_reweighting_interrupt``). Returns (state, solver)."""
+    by simulation), see ``GaussNewton.run``. A solve at ``estimated`` levels (a noise
+    round) ends at the statistical resolution; one that another round may follow passes the
+    sensors' std ``sensor_std`` [SI] and also ends once re-weighting gains more
+    (``_round_interrupt``). Returns (state, solver)."""
     ms = run.ms.uniform()
     gn = run.solver(ms, freeze_sloppy=True)
     state = SolverState(start.nodes.copy(), start.theta.copy(), start.active.copy())
@@ -329,7 +348,7 @@ def warm_solve(run: FitRun, start: SolverState, label: str, sensor_std: np.ndarr
             radius=0.5,
             watchdog=False,
             stall_defect_tol=run.options.defect_tol,
-            interrupt=None if sensor_std is None else _reweighting_interrupt(ms, sensor_std),
+            interrupt=_round_interrupt(ms, sensor_std) if estimated else None,
         )
     )
     run.add_evaluations(gn.evaluations)

@@ -48,10 +48,18 @@ def replays_rest(run: FitRun) -> bool:
     )
 
 
-def solve_from_replayed_rest(run: FitRun, best: Fitted, recordings) -> tuple[FitRun, Fitted]:
+def solve_from_replayed_rest(
+    run: FitRun,
+    best: Fitted,
+    recordings,
+    estimated: bool = False,
+    sensor_std: np.ndarray | None = None,
+) -> tuple[FitRun, Fitted]:
     """The run and its end after the last solve (module docstring) on ``recordings``, from
     ``best``, the stages' converged end; or ``run`` and ``best`` with a stage saying the
-    solve was rejected."""
+    solve was rejected. At ``estimated`` levels it ends as a noise round does, and with the
+    sensors' std ``sensor_std`` [SI] (rounds follow it) also once re-weighting gains more
+    (``noise_rounds.warm_solve``)."""
     options = replace(run.options, rest_start="replay")
     ms = MultipleShooting(run.problem, transcription=options.transcription_options)
     replayed = replace(run, options=options, ms=ms)
@@ -60,7 +68,7 @@ def solve_from_replayed_rest(run: FitRun, best: Fitted, recordings) -> tuple[Fit
     first = ms.first_window[[experiment.at_rest for experiment in run.problem.experiments]]
     nodes[first] = fresh[first]
     start = SolverState(nodes, best.state.theta.copy(), best.state.active.copy())
-    state, gn = warm_solve(replayed, start, STAGE)
+    state, gn = warm_solve(replayed, start, STAGE, estimated, sensor_std)
     ended = Fitted(state, gn, None, best.held)
     stalled = run.stages[-1]
     if not stalled.converged:

@@ -41,25 +41,20 @@ def _boxed_result(boxed, options):
 
 def test_opening_friction_to_zero_does_not_use_up_a_widening(monkeypatch):
     """Friction on its lower bound first, then a mass on the box at every factor: the mass still
-    gets the factor squared ``StrategySettings.box_widenings`` times (10, 100, 1e4), then one
-    whole fit (``may_widen`` False) that is judged."""
+    gets the factor squared ``StrategySettings.box_widenings`` times (10, 100, 1e4), and the
+    fit in the last box is the answer (a failure saying the box decided)."""
     from hframe_id.fitting import fit as fit_module
 
     calls = []
 
-    def fake(recordings, initial, options, may_widen=False, screened=False):
-        calls.append((options.bound_factor, options.zero_reachable, may_widen))
+    def fake(recordings, initial, options, box=None, screened=False):
+        calls.append((options.bound_factor, options.zero_reachable))
         boxed = ("b",) if not options.zero_reachable else ("m",)
         return _boxed_result(boxed, options)
 
     monkeypatch.setattr(fit_module, "fit_in_box", fake)
     fit_module._fit_widening([], None, FitOptions(bound_factor=10.0))
-    assert calls == [
-        (10.0, (), True),
-        (10.0, ("b",), True),
-        (100.0, ("b",), True),
-        (1e4, ("b",), False),
-    ]
+    assert calls == [(10.0, ()), (10.0, ("b",)), (100.0, ("b",)), (1e4, ("b",))]
 
 
 @dataclasses.dataclass

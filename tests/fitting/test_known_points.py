@@ -1,6 +1,8 @@
 """Points the fit knows (``fitting.known_points``): the reference files, and the simulation
 criterion they are judged by."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -129,3 +131,24 @@ def test_a_fits_free_runs_are_simulated_once(monkeypatch, table, steps):
     x0 = [np.zeros(8)] * len(steps)
     simulation_criterion(table, steps, std, None, x0, simulations=simulations)
     assert len(runs) == 5
+
+
+def test_against_held_judges_the_model_and_the_held_mean_under_the_fits_levels(truth, steps):
+    """Both predictions are weighed by the levels the fit reports, per recording (here the
+    second recording's at twice the first's), not each by its own: the plant explains its
+    two x-steps; with the voltages zeroed (motion kept) its simulation stays at rest and
+    does not beat the held mean, the best constant."""
+    from hframe_id.fitting.known_points import Criterion, held_criterion
+    from hframe_id.models import build_model
+    from hframe_id.validation.replay import channels
+
+    names = channels(build_model("hframe-8"), steps[0]).names
+    levels = ({name: 1e-5 for name in names}, {name: 2e-5 for name in names})
+    criterion = Criterion(tuple(steps), levels[0], {}, True, fit_levels=levels)
+    model, held = criterion.against_held(truth, None)
+    assert model == pytest.approx(simulation_criterion(truth, steps, levels), rel=1e-12)
+    assert held == pytest.approx(held_criterion(steps, levels, None, False, "hframe-8"), rel=1e-12)
+    assert model < held - 1.92
+    still = tuple(dataclasses.replace(rec, inputs=np.zeros_like(rec.inputs)) for rec in steps)
+    model, held = Criterion(still, levels[0], {}, True, fit_levels=levels).against_held(truth, None)
+    assert held < model

@@ -5,6 +5,7 @@ test_holds.py; the stages themselves: test_stages.py; whole fits: integration/."
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from hframe_id.fitting import FitOptions, local_fit, unmeasured
+from hframe_id.fitting.box_opening import BoxOpening
 from hframe_id.fitting.fit_run import Fitted
 from hframe_id.fitting.problem import build_problem
 from hframe_id.fitting.shooting import MultipleShooting
@@ -123,29 +125,35 @@ def _names(stages):
 
 
 @pytest.mark.parametrize(
-    ("unmeasured_coordinate", "state_prepass", "may_widen", "names", "prepasses"),
+    ("unmeasured_coordinate", "state_prepass", "box", "names", "prepasses"),
     [
-        (False, True, False, ["Attempts", "NoiseLevels", "ReplayedRest"], (False,)),
-        (False, True, True, ["Attempts", "OnTheBox", "NoiseLevels", "ReplayedRest"], (False,)),
+        (False, True, None, ["Attempts", "NoiseLevels", "ReplayedRest"], (False,)),
+        (
+            False,
+            True,
+            BoxOpening(10.0, 2),
+            ["Attempts", "OnTheBox", "NoiseLevels", "ReplayedRest", "OpenedBox"],
+            (False,),
+        ),
         (
             True,
             True,
-            False,
+            None,
             ["Attempts", "UnmeasuredRestarts", "NoiseLevels", "ReplayedRest"],
             (True, False),
         ),
-        (True, False, False, ["Attempts", "NoiseLevels", "ReplayedRest"], (False,)),
+        (True, False, None, ["Attempts", "NoiseLevels", "ReplayedRest"], (False,)),
     ],
 )
 def test_the_strategy_lists_its_stages_for_the_model_and_the_box(
-    monkeypatch, unmeasured_coordinate, state_prepass, may_widen, names, prepasses
+    monkeypatch, unmeasured_coordinate, state_prepass, box, names, prepasses
 ):
     """A coordinate no output measures (one-axis: the idler) adds the pre-pass attempt and
-    the restarts along its springs, unless the pre-pass is off; a fit that may widen its
-    box stops on it before the noise rounds."""
+    the restarts along its springs, unless the pre-pass is off; a fit whose box may open
+    stops on it before the noise rounds, or goes on in the opened box after them."""
     found = [1] if unmeasured_coordinate else []
     monkeypatch.setattr(local_fit, "unmeasured_coordinates", lambda ms: found)
-    stages = local_fit.strategy(_run(state_prepass=state_prepass), may_widen)
+    stages = local_fit.strategy(_run(state_prepass=state_prepass), box)
     assert _names(stages) == names
     assert stages[0].prepasses == prepasses
 
@@ -193,13 +201,18 @@ def test_noise_levels_are_estimated_where_the_options_and_the_misfit_ask(
     assert (at.rounds, at.settling) == ((3, "settling") if estimated else (0, None))
 
 
-@pytest.mark.parametrize("on_the_box", [True, False])
-def test_a_fit_on_the_default_box_ends_with_its_result_as_it_stands(on_the_box):
+@pytest.mark.parametrize(("on_the_box", "opens"), [(True, True), (True, False), (False, True)])
+def test_a_fit_on_a_box_that_opens_ends_with_its_result_as_it_stands(on_the_box, opens):
     result = SimpleNamespace(diagnostics=SimpleNamespace(at_default_box=("k_l",) * on_the_box))
     run = _run()
     run.result = lambda best: result
-    at = local_fit.OnTheBox()(_standing(run))
-    assert (at.ended is result) is on_the_box
+    box = SimpleNamespace(
+        opened=lambda options, ended: (
+            options if ended.diagnostics.at_default_box and opens else None
+        )
+    )
+    at = local_fit.OnTheBox(box)(_standing(run))
+    assert (at.ended is result) is (on_the_box and opens)
 
 
 def _stage_to(theta, called):
@@ -222,9 +235,33 @@ def test_a_stage_ending_against_the_stiffness_wall_ends_the_fit_there(monkeypatc
     called = []
     stages = tuple(_stage_to(t, called) for t in (0.0, 1.0, 2.0))
     monkeypatch.setattr(local_fit, "_started_run", lambda *args, **kwargs: run)
-    monkeypatch.setattr(local_fit, "strategy", lambda run, may_widen: stages)
+    monkeypatch.setattr(local_fit, "strategy", lambda run, box: stages)
     monkeypatch.setattr(local_fit, "_finished", lambda at: at.best.state.theta[0])
     assert local_fit.fit_in_box([], None, run.options) == 1.0
     assert called == [0.0, 1.0]
     run.against_the_wall = lambda theta: ()
     assert local_fit.fit_in_box([], None, run.options) == 2.0
+
+
+@pytest.mark.parametrize(("rounds", "interrupted"), [(0, False), (3, True), (10, False)])
+def test_the_solve_from_rest_ends_for_reweighting_only_where_rounds_follow_it(
+    monkeypatch, rounds, interrupted
+):
+    """Sensor weights (no rounds) or rounds at ``max_noise_rounds`` (10): the solve from the
+    replay's rest state is the fit's last (at estimated levels, it ends at the statistical
+    resolution as the last round does); between rounds it is one, given the sensors' std to
+    end once re-weighting gains more."""
+    given = []
+
+    def solve_from_rest(run, best, recordings, estimated=False, sensor_std=None):
+        given.append((estimated, sensor_std))
+        return run, best
+
+    monkeypatch.setattr(local_fit, "replays_rest", lambda run: True)
+    monkeypatch.setattr(local_fit, "solve_from_replayed_rest", solve_from_rest)
+    monkeypatch.setattr(local_fit, "estimate_noise", lambda *args: (args[0], *"sgrn"))
+    at = replace(_standing(_run()), rounds=rounds)
+    local_fit.ReplayedRest()(at)
+    estimated, sensor_std = given[0]
+    assert estimated is (rounds > 0)
+    assert (sensor_std is at.sensor_std) is interrupted

@@ -108,7 +108,7 @@ def test_the_rounds_end_at_a_round_that_ends_against_the_stiffness_wall(monkeypa
             run.problem.recording_std = levels
             return run
 
-        def solve(run, state, label, sensor_std=None):
+        def solve(run, state, label, estimated=False, sensor_std=None):
             interrupted.append(sensor_std is not None)
             stages.append(SimpleNamespace(converged=True))
             return SimpleNamespace(theta=state.theta + 1.0), "solver"
@@ -142,17 +142,22 @@ def test_the_reweighting_gain_is_the_majorisers_drop_at_the_new_levels():
     assert noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR) == pytest.approx(0, abs=1e-9)
 
 
-def test_a_round_is_interrupted_once_reweighting_gains_more_than_it_and_than_the_resolution():
-    """The gain of the first test, 14.9 (above the 1.92 of the 95 % likelihood ratio):
-    interrupted after iterations that gained less, not after ones that gained more; a gain
-    below 1.92 never interrupts."""
+def test_a_round_is_interrupted_once_its_iterations_gain_less_than_reweighting_or_resolution():
+    """The gain of the first test, 14.9: a round another may follow is interrupted after
+    iterations that gained less (10), not after ones that gained more (100); the last round
+    (no sensor std) is not. Any round ends, converged, once its iterations gained less than
+    the 1.92 of the 95 % likelihood ratio (1.0), whatever the gain."""
     ms, state = _fit(_errors([(0.02, 1e-4), STD[1]]), np.ones((4, 5, 2)))
-    interrupt = noise_rounds._reweighting_interrupt(ms, SENSOR)
-    assert interrupt(state.evaluation, 1.0).startswith("re-weighted: new levels lower")
+    interrupt = noise_rounds._round_interrupt(ms, SENSOR)
+    assert interrupt(state.evaluation, 10.0).startswith("re-weighted: new levels lower")
     assert interrupt(state.evaluation, 100.0) is None
+    assert noise_rounds._round_interrupt(ms, None)(state.evaluation, 10.0) is None
+    for sensor_std in (SENSOR, None):
+        stop = noise_rounds._round_interrupt(ms, sensor_std)(state.evaluation, 1.0)
+        assert stop.startswith("converged: the last iterations lowered the criterion by 1")
     ms, state = _fit(_errors([(0.0105, 1e-3), STD[1]]), np.ones((4, 5, 2)))
-    assert 0 < noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR) < 1.92
-    assert noise_rounds._reweighting_interrupt(ms, SENSOR)(state.evaluation, 0.0) is None
+    assert 0 < noise_rounds.reweighting_gain(ms, state.evaluation, SENSOR) < 1.0
+    assert noise_rounds._round_interrupt(ms, SENSOR)(state.evaluation, 2.0) is None
 
 
 def test_levels_settled_after_a_reweighted_round_get_one_round_to_its_tolerance(monkeypatch):
@@ -174,7 +179,7 @@ def test_levels_settled_after_a_reweighted_round_get_one_round_to_its_tolerance(
         run.problem.recording_std = levels
         return run
 
-    def solve(run, state, label, sensor_std=None):
+    def solve(run, state, label, estimated=False, sensor_std=None):
         interrupted.append(sensor_std is not None)
         ended = f"{noise_rounds.REWEIGHTED}: ..." if sensor_std is not None else "converged"
         stages.append(SimpleNamespace(converged=True, message=ended))

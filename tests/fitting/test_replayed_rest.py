@@ -90,7 +90,7 @@ def last_solve(monkeypatch):
     def make(converged, judged=None):
         starts = []
 
-        def warm_solve(run, start, label):
+        def warm_solve(run, start, label, estimated=False, sensor_std=None):
             starts.append(start)
             run.stages.append(
                 StageReport(label, (0.0, 0.0), 150, converged, "150 iterations", 3.0, 0.0, 0.0)

@@ -187,8 +187,8 @@ def test_a_stalled_last_noise_round_is_rejected(realistic_steps, monkeypatch, st
     real_warm_solve = noise_rounds.warm_solve
     rounds = []
 
-    def warm_solve(run, start, label, sensor_std=None):
-        state, gn = real_warm_solve(run, start, label, sensor_std)
+    def warm_solve(run, start, label, *interrupts):
+        state, gn = real_warm_solve(run, start, label, *interrupts)
         names = run.problem.model.parameter_names
         rounds.append(dict(zip(names, run.problem.parameters(state.theta), strict=True)))
         if len(rounds) == stalled_round:

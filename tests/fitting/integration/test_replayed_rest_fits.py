@@ -48,8 +48,8 @@ def stalling_last_solve(monkeypatch):
     """The last solve run as it is, then reported as stopped unconverged."""
     real = replayed_rest.warm_solve
 
-    def stalling(run, start, label):
-        state, gn = real(run, start, label)
+    def stalling(run, start, label, *interrupts):
+        state, gn = real(run, start, label, *interrupts)
         run.stages[-1] = replace(
             run.stages[-1], converged=False, message="not converged in 0 iterations"
         )
