@@ -160,6 +160,14 @@ def test_a_round_is_interrupted_once_its_iterations_gain_less_than_reweighting_o
     assert noise_rounds._round_interrupt(ms, SENSOR)(state.evaluation, 2.0) is None
 
 
+def test_iterations_over_which_the_cost_rose_end_no_round():
+    """A solve from new nodes (from rest) raises its cost while its defects close: that is
+    neither a crawl below the resolution nor iterations that gained less than re-weighting."""
+    ms, state = _fit(_errors([(0.02, 1e-4), STD[1]]), np.ones((4, 5, 2)))
+    assert noise_rounds._round_interrupt(ms, SENSOR)(state.evaluation, -2.3e4) is None
+    assert noise_rounds._round_interrupt(ms, None)(state.evaluation, -1.0) is None
+
+
 def test_levels_settled_after_a_reweighted_round_get_one_round_to_its_tolerance(monkeypatch):
     """Rounds that may end for re-weighting do (message ``REWEIGHTED``); once the levels no
     longer move, the fit does not end on such a round: one more, without the interrupt, then
