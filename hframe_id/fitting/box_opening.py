@@ -75,14 +75,8 @@ def opened_box_report(ended: FitResult, before: FitOptions, after: FitOptions) -
     if after.bound_factor != before.bound_factor:
         opened.append(f"bound factor {before.bound_factor:g} -> {after.bound_factor:g}")
     last = ended.stages[-1]
-    return StageReport(
-        name=OPENED_BOX_STAGE,
-        smoothing=last.smoothing,
-        iterations=0,
-        converged=True,
-        message=f"{', '.join(ended.diagnostics.at_default_box)} ended on the default box; "
-        f"{'; '.join(opened)}; the fit goes on from its end",
-        cost=last.cost,
-        max_defect=last.max_defect,
-        wall_time_s=0.0,
+    message = (
+        f"{', '.join(ended.diagnostics.at_default_box)} ended on the default box; "
+        f"{'; '.join(opened)}; the fit goes on from its end"
     )
+    return StageReport.verdict(OPENED_BOX_STAGE, last, message, last.cost, last.max_defect)

@@ -311,16 +311,13 @@ def _round_label(rounds: int, names, levels: np.ndarray) -> str:
 def _rejected_round_report(stalled: StageReport, kept: int, ms, state) -> StageReport:
     """The stage that records a stalled last round rejected and round ``kept``'s optimum
     taken as the fit."""
-    return StageReport(
-        name=REJECTED_ROUND_STAGE,
-        smoothing=stalled.smoothing,
-        iterations=0,
-        converged=True,
-        message=f"the last noise round did not converge ({stalled.message}); the fit is "
+    return StageReport.verdict(
+        REJECTED_ROUND_STAGE,
+        stalled,
+        f"the last noise round did not converge ({stalled.message}); the fit is "
         f"noise round {kept}'s optimum, its noise levels not settled",
-        cost=state.evaluation.cost,
-        max_defect=float(np.max(np.abs(ms.defects(state.evaluation, state.nodes)), initial=0)),
-        wall_time_s=0.0,
+        state.evaluation.cost,
+        float(np.max(np.abs(ms.defects(state.evaluation, state.nodes)), initial=0)),
     )
 
 

@@ -119,13 +119,5 @@ def _verdict(name: str, stalled: StageReport, kept: Fitted, ms, message: str) ->
     """The stage that records what became of a last solve that stopped unconverged
     (``stalled``): ``kept``, the end the fit keeps, on its transcription ``ms``."""
     evaluation, nodes = kept.state.evaluation, kept.state.nodes
-    return StageReport(
-        name=name,
-        smoothing=stalled.smoothing,
-        iterations=0,
-        converged=True,
-        message=message,
-        cost=evaluation.cost,
-        max_defect=float(np.max(np.abs(ms.defects(evaluation, nodes)), initial=0)),
-        wall_time_s=0.0,
-    )
+    defect = float(np.max(np.abs(ms.defects(evaluation, nodes)), initial=0))
+    return StageReport.verdict(name, stalled, message, evaluation.cost, defect)

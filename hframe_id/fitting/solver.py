@@ -59,6 +59,15 @@ class StageReport:
     substeps: tuple[int, int] = (0, 0)
     radius: float = math.nan
 
+    @classmethod
+    def verdict(
+        cls, name: str, after: StageReport, message: str, cost: float, max_defect: float
+    ) -> StageReport:
+        """A stage that records a decision on the stages before it, ``after`` the last of them
+        (its smoothing): no iterations, no time, converged at the end the fit keeps (its
+        ``cost`` and ``max_defect``)."""
+        return cls(name, after.smoothing, 0, True, message, cost, max_defect, 0.0)
+
 
 def _penalty_parameter(mu: float, change: float, l1: float, rho: float) -> float:
     """The l1 penalty parameter for a step that closes the linearised defects.
