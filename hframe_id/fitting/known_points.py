@@ -271,7 +271,7 @@ class Criterion:
     concentrated: bool
     simulations: Simulations | None = None
     #: per recording, each channel's noise level [SI] the fit reports (its estimated levels,
-    #: or the sensors' std for each recording)
+    #: or the sensors' std for each recording); empty: ``channel_std``
     fit_levels: tuple[dict[str, float], ...] = ()
 
     @classmethod
@@ -326,18 +326,17 @@ class Criterion:
         with each prediction at its own levels (the concentrated criterion) it counted
         N / 2 ln(1 / v) without bound (dev plant 57 of issue 25: failed as explaining
         nothing, held-out motor angles 0.94 x its reduction's, which failed the same
-        way)."""
+        way). Without ``fit_levels``, under ``channel_std``."""
+        levels = self.fit_levels or self.channel_std
         model = simulation_criterion(
             params,
             self.recordings,
-            self.fit_levels,
+            levels,
             self.latency_samples,
             initial_states,
             simulations=self.simulations,
         )
-        held = held_criterion(
-            self.recordings, self.fit_levels, self.latency_samples, False, params.variant
-        )
+        held = held_criterion(self.recordings, levels, self.latency_samples, False, params.variant)
         return model, held
 
     @property

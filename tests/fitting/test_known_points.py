@@ -152,3 +152,14 @@ def test_against_held_judges_the_model_and_the_held_mean_under_the_fits_levels(t
     still = tuple(dataclasses.replace(rec, inputs=np.zeros_like(rec.inputs)) for rec in steps)
     model, held = Criterion(still, levels[0], {}, True, fit_levels=levels).against_held(truth, None)
     assert held < model
+
+
+def test_against_held_without_the_fits_levels_uses_the_criterions_std(truth, steps):
+    from hframe_id.fitting.known_points import Criterion, held_criterion
+    from hframe_id.models import build_model
+    from hframe_id.validation.replay import channels
+
+    std = {name: 1e-5 for name in channels(build_model("hframe-8"), steps[0]).names}
+    model, held = Criterion(tuple(steps), std, {}, False).against_held(truth, None)
+    assert model == pytest.approx(simulation_criterion(truth, steps, std), rel=1e-12)
+    assert held == pytest.approx(held_criterion(steps, std, None, False, "hframe-8"), rel=1e-12)
