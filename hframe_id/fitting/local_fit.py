@@ -104,15 +104,18 @@ def fit_in_box(
 class Standing:
     """Where a fit in one box stands between its stages: its run (``FitRun``; the noise
     rounds and the last solve replace it), its best end so far (``Fitted``), the recordings,
-    the sensors' noise std [SI] the run began with, the noise rounds run and how settled
-    their levels are, whether the output-error stages deferred to the rounds, and the result
-    of a stage that ended the fit early (``ended``), else None."""
+    the sensors' noise std [SI] the run began with, the noise rounds run in its box and how
+    settled their levels are, the rounds run in the boxes before it (``OpenedBox``; each box
+    has its own ``max_noise_rounds``, the report counts them all), whether the output-error
+    stages deferred to the rounds, and the result of a stage that ended the fit early
+    (``ended``), else None."""
 
     run: FitRun
     recordings: list[Recording]
     sensor_std: np.ndarray
     best: Fitted | None = None
     rounds: int = 0
+    earlier_rounds: int = 0
     settling: NoiseSettling | None = None
     deferred: bool = False
     ended: FitResult | None = None
@@ -263,7 +266,8 @@ def _continued_in(options: FitOptions, at: Standing, ended: FitResult) -> Standi
         return replace(at, run=run, best=Fitted(state, gn, run.statistics(gn, state)))
     run, state, gn, rounds, settling = estimate_noise(run, state, at.recordings, at.sensor_std)
     best = Fitted(state, gn, run.statistics(gn, state))
-    return replace(at, run=run, best=best, rounds=rounds, settling=settling)
+    earlier = at.earlier_rounds + at.rounds
+    return replace(at, run=run, best=best, rounds=rounds, settling=settling, earlier_rounds=earlier)
 
 
 def _finished(at: Standing) -> FitResult:
@@ -274,7 +278,11 @@ def _finished(at: Standing) -> FitResult:
     result = run.result(best)
     result = result.with_diagnostics(
         noise=noise_report(
-            run.problem, at.sensor_std, result.diagnostics.channel_rms, at.rounds, at.settling
+            run.problem,
+            at.sensor_std,
+            result.diagnostics.channel_rms,
+            at.earlier_rounds + at.rounds,
+            at.settling,
         )
     )
     result = _misfit_judged(result, run.ms, best.state, at.sensor_std, estimated=bool(at.rounds))

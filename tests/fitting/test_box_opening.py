@@ -9,6 +9,7 @@ import pytest
 
 from hframe_id.fitting import FitOptions, local_fit
 from hframe_id.fitting.box_opening import OPENED_BOX_STAGE, BoxOpening, opened_box_report
+from hframe_id.fitting.solver import SolverState
 
 
 def _ended(boxed, b_estimate=0.1):
@@ -98,3 +99,28 @@ def test_a_fit_goes_on_in_the_opened_box_until_nothing_is_left_to_open(monkeypat
     monkeypatch.setattr(local_fit, "ReplayedRest", lambda: lambda at: at)
     local_fit.OpenedBox(BoxOpening(10.0, 2))(at)
     assert factors == ([] if wall else [100.0, 1e4])
+
+
+def test_the_noise_rounds_of_every_box_are_counted_once_the_box_opens(monkeypatch):
+    """``local_fit._continued_in``: the rounds in the opened box start their own count (and
+    budget), and the rounds of the boxes before it are kept for the report
+    (``Standing.earlier_rounds``)."""
+    problem = SimpleNamespace(free=(0, 1), theta_of=lambda params: np.zeros(2), initial=None)
+    monkeypatch.setattr(local_fit, "build_problem", lambda recordings, initial, options: problem)
+    monkeypatch.setattr(local_fit, "MultipleShooting", lambda problem, transcription: "ms")
+    monkeypatch.setattr(local_fit, "opened_box_report", lambda *args: "opened")
+    monkeypatch.setattr(
+        local_fit,
+        "estimate_noise",
+        lambda run, state, recordings, std: (run, state, "gn", 3, "settled"),
+    )
+    monkeypatch.setattr(local_fit.FitRun, "statistics", lambda self, gn, state: "statistics")
+    run = local_fit.FitRun(problem, FitOptions(), "ms", None, None, None, None, 0.0)
+    state = SolverState(np.zeros((1, 2)), np.ones(2), np.zeros(2, dtype=bool))
+    best = local_fit.Fitted(state, "gn", "statistics")
+    at = local_fit.Standing(run, [], np.ones(2), best=best, rounds=4, earlier_rounds=10)
+    ended = SimpleNamespace(parameters=None)
+    opened = FitOptions(bound_factor=100.0).for_model("hframe-8")
+    after = local_fit._continued_in(opened, at, ended)
+    assert (after.rounds, after.earlier_rounds) == (3, 14)
+    assert after.run.stages == ["opened"] and after.best.state.active.all()
