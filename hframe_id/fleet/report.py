@@ -25,7 +25,11 @@ def plot_histories(
     """One PNG per parameter in the folder ``out``, staged to replace it as a whole
     (``staging`` puts it in place): per rig, the estimate's change against the rig's first
     successful run [%] over run time, with its 95 % interval as error bars and the drift
-    threshold as dashed lines. Returns the PNGs' paths in ``out``."""
+    threshold as dashed lines. Runs whose fit did not identify the parameter (never judged,
+    ``drift``) are hollow, and the view holds the changes and the threshold, not the
+    intervals (``change_view``): on a realistic fleet one poorly determined k_b had an
+    interval of 5e22 %, and every other run of every rig was drawn flat at 0.
+    Returns the PNGs' paths in ``out``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -39,12 +43,13 @@ def plot_histories(
         fig = Figure(figsize=(7, 3.5))
         FigureCanvasAgg(fig)
         ax = fig.subplots()
+        changes = []
         for rig, runs in ok[ok[value].notna()].groupby("rig", sort=True):
             base = runs[value].iloc[0]
             change = 100 * (runs[value] / base - 1)
             low = 100 * (runs[f"{name} ci95 low [{unit}]"] / base - 1)
             high = 100 * (runs[f"{name} ci95 high [{unit}]"] / base - 1)
-            ax.errorbar(
+            bars = ax.errorbar(
                 runs["run_time"],
                 change,
                 yerr=[change - low, high - change],
@@ -52,8 +57,20 @@ def plot_histories(
                 capsize=3,
                 label=str(rig),
             )
+            loose = ~runs.get(f"{name} identified", pd.Series(True, index=runs.index)).astype(bool)
+            ax.plot(
+                runs["run_time"][loose],
+                change[loose],
+                "o",
+                color=bars[0].get_color(),
+                markerfacecolor="white",
+                zorder=3,
+                label="not identified (not judged)" if loose.any() and not _marked(ax) else None,
+            )
+            changes.extend(change.tolist())
         for level in (-100 * threshold, 100 * threshold):
             ax.axhline(level, color="0.5", linestyle="--", linewidth=0.8)
+        ax.set_ylim(*change_view(changes, 100 * threshold))
         ax.set_title(f"{value}: change against each rig's first run")
         ax.set_ylabel("change [%]")
         ax.set_xlabel("run time [UTC]")
@@ -63,6 +80,22 @@ def plot_histories(
         fig.savefig(folder / f"{name}.png", dpi=90)
         names.append(f"{name}.png")
     return [out / n for n in names]
+
+
+def change_view(changes: list[float], threshold: float) -> tuple[float, float]:
+    """The y-limits [%] of a history plot: every change and +/- ``threshold`` [%], with a
+    tenth of that span to spare on each side (intervals reaching beyond are cut at the
+    edge)."""
+    finite = [c for c in changes if abs(c) < float("inf")]
+    low, high = min([-threshold, *finite]), max([threshold, *finite])
+    pad = 0.1 * (high - low)
+    return low - pad, high + pad
+
+
+def _marked(ax) -> bool:
+    """Whether the hollow marker of a run that did not identify the parameter is in the
+    legend already."""
+    return any(line.get_label() == "not identified (not judged)" for line in ax.get_lines())
 
 
 def flags_table(drifts: list[Drift]) -> list[list[str]]:
