@@ -44,6 +44,7 @@ def plot_histories(
         FigureCanvasAgg(fig)
         ax = fig.subplots()
         changes = []
+        hollow = "not identified (not judged)"  # the legend's entry, once
         for rig, runs in ok[ok[value].notna()].groupby("rig", sort=True):
             base = runs[value].iloc[0]
             change = 100 * (runs[value] / base - 1)
@@ -65,8 +66,9 @@ def plot_histories(
                 color=bars[0].get_color(),
                 markerfacecolor="white",
                 zorder=3,
-                label="not identified (not judged)" if loose.any() and not _marked(ax) else None,
+                label=hollow if loose.any() else None,
             )
+            hollow = None if loose.any() else hollow
             changes.extend(change.tolist())
         for level in (-100 * threshold, 100 * threshold):
             ax.axhline(level, color="0.5", linestyle="--", linewidth=0.8)
@@ -90,12 +92,6 @@ def change_view(changes: list[float], threshold: float) -> tuple[float, float]:
     low, high = min([-threshold, *finite]), max([threshold, *finite])
     pad = 0.1 * (high - low)
     return low - pad, high + pad
-
-
-def _marked(ax) -> bool:
-    """Whether the hollow marker of a run that did not identify the parameter is in the
-    legend already."""
-    return any(line.get_label() == "not identified (not judged)" for line in ax.get_lines())
 
 
 def flags_table(drifts: list[Drift]) -> list[list[str]]:
