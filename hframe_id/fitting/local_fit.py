@@ -275,17 +275,14 @@ def _finished(at: Standing) -> FitResult:
     parameters' uncertainty and the wall time."""
     run, best = at.run, at.best
     best.solver.evaluations = run.counter["evaluations"]
+    rounds = at.earlier_rounds + at.rounds
     result = run.result(best)
     result = result.with_diagnostics(
         noise=noise_report(
-            run.problem,
-            at.sensor_std,
-            result.diagnostics.channel_rms,
-            at.earlier_rounds + at.rounds,
-            at.settling,
+            run.problem, at.sensor_std, result.diagnostics.channel_rms, rounds, at.settling
         )
     )
-    result = _misfit_judged(result, run.ms, best.state, at.sensor_std, estimated=bool(at.rounds))
+    result = _misfit_judged(result, run.ms, best.state, at.sensor_std, estimated=bool(rounds))
     result = include_held_uncertainty(run.problem, at.recordings, best.state, result)
     return replace(result, wall_time_s=time.perf_counter() - run.started)
 
