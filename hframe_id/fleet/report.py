@@ -8,6 +8,7 @@ no backend and no global state.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -88,7 +89,7 @@ def change_view(changes: list[float], threshold: float) -> tuple[float, float]:
     """The y-limits [%] of a history plot: every change and +/- ``threshold`` [%], with a
     tenth of that span to spare on each side (intervals reaching beyond are cut at the
     edge)."""
-    finite = [c for c in changes if abs(c) < float("inf")]
+    finite = [c for c in changes if math.isfinite(c)]
     low, high = min([-threshold, *finite]), max([threshold, *finite])
     pad = 0.1 * (high - low)
     return low - pad, high + pad
