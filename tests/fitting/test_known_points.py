@@ -6,7 +6,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hframe_id.fitting.known_points import reference_sets, simulation_criterion
+from hframe_id.fitting.known_points import (
+    Criterion,
+    held_criterion,
+    reference_sets,
+    simulation_criterion,
+)
+from hframe_id.models import build_model
+from hframe_id.validation.replay import channels
 
 
 def test_the_models_reference_files_are_known_points():
@@ -84,9 +91,6 @@ def test_the_held_criterion_is_each_channel_held_at_its_mean(truth, steps):
     """The prediction that nothing moves: each record's channels at their means, judged as
     the simulation criterion judges (here chi^2 / 2 under unit levels: SSR / 2 about each
     record's mean), and worse than the plant's own simulation."""
-    from hframe_id.fitting.known_points import held_criterion
-    from hframe_id.models import build_model
-    from hframe_id.validation.replay import channels
 
     model = build_model("hframe-8")
     expected = 0.0
@@ -138,9 +142,6 @@ def test_against_held_judges_the_model_and_the_held_mean_under_the_fits_levels(t
     second recording's at twice the first's), not each by its own: the plant explains its
     two x-steps; with the voltages zeroed (motion kept) its simulation stays at rest and
     does not beat the held mean, the best constant."""
-    from hframe_id.fitting.known_points import Criterion, held_criterion
-    from hframe_id.models import build_model
-    from hframe_id.validation.replay import channels
 
     names = channels(build_model("hframe-8"), steps[0]).names
     levels = ({name: 1e-5 for name in names}, {name: 2e-5 for name in names})
@@ -155,9 +156,6 @@ def test_against_held_judges_the_model_and_the_held_mean_under_the_fits_levels(t
 
 
 def test_against_held_without_the_fits_levels_uses_the_criterions_std(truth, steps):
-    from hframe_id.fitting.known_points import Criterion, held_criterion
-    from hframe_id.models import build_model
-    from hframe_id.validation.replay import channels
 
     std = {name: 1e-5 for name in channels(build_model("hframe-8"), steps[0]).names}
     model, held = Criterion(tuple(steps), std, {}, False).against_held(truth, None)
