@@ -65,9 +65,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "report",
         help="plot each parameter over time per rig and flag drift",
         description="Per rig and parameter, the change of the latest successful fit against "
-        "the first; flagged when it is at least --threshold and the 95 %% interval of the "
-        "difference excludes zero. Prints the flags table (or --json), writes one plot per "
-        "parameter and a markdown page. Exit status 0 (also with flags), 2 bad input.",
+        "the first; flagged when it is at least --threshold, the 95 %% interval of the "
+        "difference excludes zero, and it stands out at 95 %% against the week-to-week "
+        "scatter of the other rigs' estimates. Prints the flags table (or --json), writes "
+        "one plot per parameter and a markdown page. Exit status 0 (also with flags), 2 bad input.",
     )
     report.add_argument("results", metavar="RESULTS", help="a results store (.parquet)")
     add_number(

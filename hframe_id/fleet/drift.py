@@ -6,6 +6,19 @@ its most recent one. The change is latest / baseline - 1; it is flagged when
 sqrt(se_latest^2 + se_baseline^2), excludes zero (the two fits' errors are independent: they
 fit different recordings). A parameter not identified in either fit is never flagged.
 
+Under model mismatch those standard errors understate how far a healthy rig's estimate moves
+from week to week: each week's records pull a mismatched model's parameters their own way
+(realistic fleet, seed 7: an unaged rig's k_l 29,760, 39,570 and 21,260 N/m with 4-6 %
+standard errors). So a change must also stand out against the fleet's own scatter
+(``fleet_scatter``): the robust standard deviation of the week-to-week log-changes of the
+parameter on the *other* rigs (their fits of the model each rig's latest kept, identified
+or not: an estimate that is poorly determined scatters, and that is what is measured) (a rig's own aging must not widen its own yardstick), sigma =
+1.4826 median |ln(theta_w+1 / theta_w)| / sqrt(2) (a healthy week's estimate is off by
+sigma, a difference of two by sqrt(2) sigma; the median, as a few other rigs may have aged
+on it too). The change is flagged only if also |ln(latest / baseline)| > 1.96 sqrt(2) sigma.
+Without other rigs' changes (one rig, or a parameter fitted to zero) only the first test
+applies.
+
 Only fits of one model are compared: where a fit chose the larger model its job's nests in
 (``fitted_model``: hframe-8-current-limit for an hframe-8 job whose records a current limit
 shapes), its shared parameters are not bent around the missing limit as the smaller model's
@@ -21,6 +34,7 @@ import math
 import re
 from dataclasses import asdict, dataclass
 
+import numpy as np
 import pandas as pd
 
 #: Default drift threshold: a 10 % change (belt stiffness, friction, motor gain).
@@ -43,6 +57,10 @@ class Drift:
     z: float
     runs: int
     flagged: bool
+    #: the other rigs' week-to-week relative scatter sigma (``fleet_scatter``; nan: none)
+    scatter: float = math.nan
+    #: ln(latest / baseline) / (sqrt(2) sigma) (nan without a scatter)
+    z_scatter: float = math.nan
 
     def as_dict(self) -> dict:
         """The row as plain data (the ``--json`` shape)."""
@@ -94,37 +112,79 @@ def structure_changes(frame: pd.DataFrame) -> dict[str, list[str]]:
     return changes
 
 
+def compared_runs(frame: pd.DataFrame) -> dict[str, tuple[str, pd.DataFrame]]:
+    """Rig -> (the model its latest fit kept, its successful fits of that model)."""
+    compared = {}
+    for rig, runs in successful(frame).groupby("rig", sort=True):
+        kept = fitted_model(runs)
+        compared[str(rig)] = (kept.iloc[-1], runs[kept == kept.iloc[-1]])
+    return compared
+
+
+def usable_values(runs: pd.DataFrame, name: str, unit: str) -> pd.DataFrame:
+    """The runs whose fit estimated and identified ``name``."""
+    value = f"{name} [{unit}]"
+    identified = runs.get(f"{name} identified", pd.Series(True, index=runs.index))
+    return runs[runs[value].notna() & identified.fillna(False).astype(bool)]
+
+
+def week_to_week_log_changes(values: pd.Series) -> list[float]:
+    """ln(theta_w+1 / theta_w) between a rig's successive estimates, where both are > 0."""
+    v = values.to_numpy(dtype=float)
+    return [math.log(b / a) for a, b in itertools.pairwise(v) if a > 0 and b > 0]
+
+
+def fleet_scatter(changes_of_other_rigs: list[float]) -> float:
+    """A healthy estimate's relative scatter sigma from week-to-week log-changes (module
+    docstring): 1.4826 median |d| / sqrt(2); nan without any."""
+    if not changes_of_other_rigs:
+        return math.nan
+    return 1.4826 * float(np.median(np.abs(changes_of_other_rigs))) / math.sqrt(2)
+
+
 def drift_table(frame: pd.DataFrame, threshold: float = DEFAULT_THRESHOLD) -> list[Drift]:
     """Every (rig, parameter) with at least two successful, identified runs of the model the
     rig's latest fit kept."""
     rows = []
-    ok = successful(frame)
-    for rig, runs in ok.groupby("rig", sort=True):
-        kept = fitted_model(runs)
-        runs = runs[kept == kept.iloc[-1]]
-        for name, unit in parameters_of(ok):
-            value, std = f"{name} [{unit}]", f"{name} std [{unit}]"
-            identified = runs.get(f"{name} identified", pd.Series(True, index=runs.index))
-            usable = runs[runs[value].notna() & identified.fillna(False).astype(bool)]
-            if len(usable) < 2:
+    compared = compared_runs(frame)
+    for name, unit in parameters_of(successful(frame)):
+        value, std = f"{name} [{unit}]", f"{name} std [{unit}]"
+        usable = {rig: usable_values(runs, name, unit) for rig, (_, runs) in compared.items()}
+        log_changes = {
+            rig: week_to_week_log_changes(runs[value]) for rig, (_, runs) in compared.items()
+        }
+        for rig, runs in usable.items():
+            if len(runs) < 2:
                 continue
-            first, last = usable.iloc[0], usable.iloc[-1]
-            change = _relative_change(first[value], last[value])
-            spread = math.hypot(last[std], first[std])
-            difference = last[value] - first[value]
-            z = difference / spread if spread > 0 else math.copysign(math.inf, difference)
-            flagged = abs(change) >= threshold and abs(z) > Z95
+            others = [d for other, ds in log_changes.items() if other != rig for d in ds]
             rows.append(
-                Drift(
-                    str(rig),
-                    name,
-                    unit,
-                    float(first[value]),
-                    float(last[value]),
-                    float(change),
-                    float(z),
-                    len(usable),
-                    bool(flagged),
-                )
+                _drift(rig, name, unit, runs[value], runs[std], fleet_scatter(others), threshold)
             )
-    return rows
+    return sorted(rows, key=lambda d: d.rig)
+
+
+def _drift(rig, name, unit, values, stds, scatter: float, threshold: float) -> Drift:
+    """The baseline (first) and latest (last) of a rig's ``values`` judged (module docstring)."""
+    first, last = float(values.iloc[0]), float(values.iloc[-1])
+    change = _relative_change(first, last)
+    spread = math.hypot(float(stds.iloc[-1]), float(stds.iloc[0]))
+    difference = last - first
+    z = difference / spread if spread > 0 else math.copysign(math.inf, difference)
+    z_scatter = math.nan
+    if scatter > 0 and first > 0 and last > 0:
+        z_scatter = math.log(last / first) / (math.sqrt(2) * scatter)
+    # nan (no scatter to judge against) leaves the decision to the first two tests
+    flagged = abs(change) >= threshold and abs(z) > Z95 and not abs(z_scatter) <= Z95
+    return Drift(
+        rig,
+        name,
+        unit,
+        first,
+        last,
+        float(change),
+        float(z),
+        len(values),
+        bool(flagged),
+        scatter,
+        z_scatter,
+    )

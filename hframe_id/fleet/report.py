@@ -97,7 +97,9 @@ def change_view(changes: list[float], threshold: float) -> tuple[float, float]:
 
 def flags_table(drifts: list[Drift]) -> list[list[str]]:
     """Header and one row per flagged (rig, parameter)."""
-    rows = [["rig", "parameter", "baseline", "latest", "change [%]", "z", "runs"]]
+    rows = [
+        ["rig", "parameter", "baseline", "latest", "change [%]", "z", "fleet scatter [%]", "runs"]
+    ]
     for d in drifts:
         if d.flagged:
             rows.append(
@@ -108,6 +110,7 @@ def flags_table(drifts: list[Drift]) -> list[list[str]]:
                     f"{d.latest:.5g}",
                     f"{100 * d.change:+.1f}",
                     f"{d.z:+.1f}",
+                    "-" if math.isnan(d.scatter) else f"{100 * d.scatter:.1f}",
                     str(d.runs),
                 ]
             )
@@ -143,6 +146,8 @@ def summary(
                 "baseline": d.baseline,
                 "latest": d.latest,
                 "z": d.z,
+                "scatter": None if math.isnan(d.scatter) else d.scatter,
+                "z_scatter": None if math.isnan(d.z_scatter) else d.z_scatter,
             }
             for d in drifts
             if d.flagged
@@ -171,7 +176,9 @@ def write_markdown(
         f"{report['fits']} fits of {report['rigs']} rigs from `{report['results']}` "
         f"({', '.join(f'{n} {s}' for s, n in report['by_status'].items())}). Drift: change "
         f"of the latest run against the rig's first of at least {100 * report['threshold']:g} "
-        "% with the 95 % interval of the difference excluding zero.",
+        "% with the 95 % interval of the difference excluding zero, and standing out at 95 % "
+        "against the other rigs' week-to-week scatter (fleet scatter: relative std of a "
+        "healthy estimate).",
         "",
         "## Flagged",
         "",

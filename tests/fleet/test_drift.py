@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import pandas as pd
 import pytest
 
-from hframe_id.fleet.drift import drift_table, structure_changes
+from hframe_id.fleet.drift import (
+    drift_table,
+    fleet_scatter,
+    structure_changes,
+    week_to_week_log_changes,
+)
 from hframe_id.fleet.report import structure_lines
 
 LIMITED = "hframe-8-current-limit"
@@ -86,3 +93,55 @@ def test_a_rig_back_on_its_first_model_is_judged_over_that_models_fits():
     assert structure_changes(frame) == {"rig-01": ["hframe-8", LIMITED, "hframe-8"]}
     (line,) = structure_lines(structure_changes(frame))
     assert line.endswith("drift is judged over its hframe-8 fits only")
+
+
+def _history(rig: str, values: list[float], std: float = 0.01) -> list[dict]:
+    rows = []
+    for week, k_l in enumerate(values):
+        row = _row(rig, week, "hframe-8", "hframe-8", k_l)
+        row["k_l std [N/m]"] = std * k_l
+        rows.append(row)
+    return rows
+
+
+def test_fleet_scatter_is_a_robust_std_of_one_estimate():
+    # |d| = 0.1, 0.1, 0.1, 0.1, 5 (one rig on another optimum): median 0.1; a difference
+    # of two healthy estimates has sqrt(2) sigma.
+    assert fleet_scatter([0.1, -0.1, 0.1, -0.1, 5.0]) == pytest.approx(1.4826 * 0.1 / math.sqrt(2))
+    assert math.isnan(fleet_scatter([]))
+    assert week_to_week_log_changes(pd.Series([100.0, 0.0, 50.0, 100.0])) == pytest.approx(
+        [math.log(2.0)]
+    )
+
+
+def test_a_change_within_the_fleets_week_to_week_scatter_is_not_flagged():
+    # Every rig's estimate moves +/-30 % between weeks with 1 % standard errors (fits of a
+    # mismatched model landing on other optima): rig-01's -28 % is not drift.
+    frame = pd.DataFrame(
+        _history("rig-01", [100.0, 130.0, 72.0])
+        + _history("rig-02", [100.0, 70.0, 100.0])
+        + _history("rig-03", [100.0, 135.0, 95.0])
+    )
+    drifts = {d.rig: d for d in drift_table(frame)}
+    assert abs(drifts["rig-01"].z) > 1.96  # the standard errors alone would flag it
+    assert drifts["rig-01"].scatter > 0.2
+    assert not any(d.flagged for d in drifts.values())
+
+
+def test_a_rigs_own_aging_does_not_widen_its_yardstick():
+    # rig-03 ages 15 % a week; the healthy rigs scatter by 1 %: only rig-03 is flagged,
+    # its scatter from rig-01 and rig-02 alone.
+    frame = pd.DataFrame(
+        _history("rig-01", [100.0, 101.0, 99.5])
+        + _history("rig-02", [100.0, 99.0, 100.5])
+        + _history("rig-03", [100.0, 85.0, 70.0])
+    )
+    drifts = {d.rig: d for d in drift_table(frame)}
+    assert [rig for rig, d in drifts.items() if d.flagged] == ["rig-03"]
+    assert drifts["rig-03"].scatter < 0.02
+    assert drifts["rig-03"].z_scatter < -1.96
+
+
+def test_without_other_rigs_the_interval_alone_decides():
+    (drift,) = drift_table(pd.DataFrame(_history("rig-01", [100.0, 70.0])))
+    assert math.isnan(drift.scatter) and drift.flagged
