@@ -11,13 +11,13 @@ from week to week: each week's records pull a mismatched model's parameters thei
 (realistic fleet, seed 7: an unaged rig's k_l 29,760, 39,570 and 21,260 N/m with 4-6 %
 standard errors). So a change must also stand out against the fleet's own scatter
 (``fleet_scatter``): the robust standard deviation of the week-to-week log-changes of the
-parameter on the *other* rigs (their fits of the model each rig's latest kept, identified
-or not: an estimate that is poorly determined scatters, and that is what is measured) (a rig's own aging must not widen its own yardstick), sigma =
-1.4826 median |ln(theta_w+1 / theta_w)| / sqrt(2) (a healthy week's estimate is off by
-sigma, a difference of two by sqrt(2) sigma; the median, as a few other rigs may have aged
-on it too). The change is flagged only if also |ln(latest / baseline)| > 1.96 sqrt(2) sigma.
-Without other rigs' changes (one rig, or a parameter fitted to zero) only the first test
-applies.
+parameter on the *other* rigs (a rig's own aging must not widen its own yardstick; their
+fits of the model each rig's latest kept, identified or not: a poorly determined estimate
+scatters, and that is what is measured), sigma = 1.4826 median |ln(theta_w+1 / theta_w)| /
+sqrt(2) (a healthy week's estimate is off by sigma, a difference of two by sqrt(2) sigma; the
+median, as a few other rigs may have aged on it too). The change is flagged only if also
+|ln(latest / baseline)| > 1.96 sqrt(2) sigma. Without other rigs' changes (one rig, or a
+parameter fitted to zero) only the first test applies.
 
 Only fits of one model are compared: where a fit chose the larger model its job's nests in
 (``fitted_model``: hframe-8-current-limit for an hframe-8 job whose records a current limit
