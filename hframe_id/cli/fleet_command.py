@@ -166,7 +166,10 @@ def run_report(args: argparse.Namespace) -> int:
     print(f"{report['fits']} fits of {report['rigs']} rigs ({by_status})")
     rows = flags_table(drifts)
     if len(rows) > 1:
-        print(f"drift >= {100 * threshold:g} % (95 % interval excludes no change):")
+        print(
+            f"drift >= {100 * threshold:g} % (95 % interval excludes no change; beyond the "
+            "other rigs' week-to-week scatter at 95 %):"
+        )
         print(format_table(rows))
     else:
         print(f"no drift >= {100 * threshold:g} %")
