@@ -123,8 +123,14 @@ def test_device_watchdog_drops_the_outputs_when_commands_stop():
 
 def test_device_cuts_the_outputs_on_a_limit_switch_whatever_the_host_commands():
     # Limit switch 2 mm from the start: -6 V y-motion reaches y_max within ~0.1 s. The host
-    # here keeps commanding -6 V (a host without the logger's own limit check).
-    with emulator("--lockstep", "--travel", "y", "-0.25", "0.002") as port, SerialRig(port) as rig:
+    # here keeps commanding -6 V (a host without the logger's own limit check). The device
+    # answers each command (lockstep); a link timeout far above a loaded machine's
+    # scheduling pauses (the default 0.1 s was exceeded by the first sample with a fit
+    # running beside the suite), as in the link-fault test: the link is not the subject.
+    with (
+        emulator("--lockstep", "--travel", "y", "-0.25", "0.002") as port,
+        SerialRig(port, link_timeout_s=5.0) as rig,
+    ):
         rig.start()
         samples = [rig.read()]
         for _ in range(300):
