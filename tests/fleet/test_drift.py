@@ -104,6 +104,12 @@ def _history(rig: str, values: list[float], std: float = 0.01) -> list[dict]:
     return rows
 
 
+def _drifts(k_l_by_rig: dict[str, list[float]]) -> dict:
+    """Rig -> its k_l drift, each rig's weekly estimates given with 1 % standard errors."""
+    rows = [row for rig, values in k_l_by_rig.items() for row in _history(rig, values)]
+    return {d.rig: d for d in drift_table(pd.DataFrame(rows))}
+
+
 def test_fleet_scatter_is_a_robust_std_of_one_estimate():
     # |d| = 0.1, 0.1, 0.1, 0.1, 5 (one rig on another optimum): median 0.1; a difference
     # of two healthy estimates has sqrt(2) sigma.
@@ -117,12 +123,13 @@ def test_fleet_scatter_is_a_robust_std_of_one_estimate():
 def test_a_change_within_the_fleets_week_to_week_scatter_is_not_flagged():
     # Every rig's estimate moves +/-30 % between weeks with 1 % standard errors (fits of a
     # mismatched model landing on other optima): rig-01's -28 % is not drift.
-    frame = pd.DataFrame(
-        _history("rig-01", [100.0, 130.0, 72.0])
-        + _history("rig-02", [100.0, 70.0, 100.0])
-        + _history("rig-03", [100.0, 135.0, 95.0])
+    drifts = _drifts(
+        {
+            "rig-01": [100.0, 130.0, 72.0],
+            "rig-02": [100.0, 70.0, 100.0],
+            "rig-03": [100.0, 135.0, 95.0],
+        }
     )
-    drifts = {d.rig: d for d in drift_table(frame)}
     assert abs(drifts["rig-01"].z) > 1.96  # the standard errors alone would flag it
     assert drifts["rig-01"].scatter > 0.2
     assert not any(d.flagged for d in drifts.values())
@@ -131,12 +138,13 @@ def test_a_change_within_the_fleets_week_to_week_scatter_is_not_flagged():
 def test_a_rigs_own_aging_does_not_widen_its_yardstick():
     # rig-03 ages 15 % a week; the healthy rigs scatter by 1 %: only rig-03 is flagged,
     # its scatter from rig-01 and rig-02 alone.
-    frame = pd.DataFrame(
-        _history("rig-01", [100.0, 101.0, 99.5])
-        + _history("rig-02", [100.0, 99.0, 100.5])
-        + _history("rig-03", [100.0, 85.0, 70.0])
+    drifts = _drifts(
+        {
+            "rig-01": [100.0, 101.0, 99.5],
+            "rig-02": [100.0, 99.0, 100.5],
+            "rig-03": [100.0, 85.0, 70.0],
+        }
     )
-    drifts = {d.rig: d for d in drift_table(frame)}
     assert [rig for rig, d in drifts.items() if d.flagged] == ["rig-03"]
     assert drifts["rig-03"].scatter < 0.02
     assert drifts["rig-03"].z_scatter < -1.96
