@@ -16,8 +16,9 @@ fits of the model each rig's latest kept, identified or not: a poorly determined
 scatters, and that is what is measured), sigma = 1.4826 median |ln(theta_w+1 / theta_w)| /
 sqrt(2) (a healthy week's estimate is off by sigma, a difference of two by sqrt(2) sigma; the
 median, as a few other rigs may have aged on it too). The change is flagged only if also
-|ln(latest / baseline)| > 1.96 sqrt(2) sigma. Without other rigs' changes (one rig, or a
-parameter fitted to zero) only the first test applies.
+|ln(latest / baseline)| > 1.96 sqrt(2) sigma. Without other rigs' changes (one rig, or
+estimates that are not all positive: a friction fitted to zero) or with a baseline or latest
+value <= 0, only the first test applies.
 
 Only fits of one model are compared: where a fit chose the larger model its job's nests in
 (``fitted_model``: hframe-8-current-limit for an hframe-8 job whose records a current limit
