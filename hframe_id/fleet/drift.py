@@ -16,9 +16,15 @@ fits of the model each rig's latest kept, identified or not: a poorly determined
 scatters, and that is what is measured), sigma = 1.4826 median |ln(theta_w+1 / theta_w)| /
 sqrt(2) (a healthy week's estimate is off by sigma, a difference of two by sqrt(2) sigma; the
 median, as a few other rigs may have aged on it too). The change is flagged only if also
-|ln(latest / baseline)| > 1.96 sqrt(2) sigma. Without other rigs' changes (one rig, or
-estimates that are not all positive: a friction fitted to zero) or with a baseline or latest
-value <= 0, only the first test applies.
+z_scatter = ln(latest / baseline) / (sqrt(2) sigma) stands out at 95 %: |z_scatter| > c, the
+critical value of that statistic for the estimate of sigma actually used
+(``scatter_critical_value``). sigma comes from a handful of changes (four rigs over three
+weeks: six, two per rig and each pair sharing a week), so c is not 1.96, which holds for a
+known sigma: it is the 95 % quantile of |z_scatter| over draws of a healthy fleet (every
+estimate an independent normal, the other rigs' changes formed as for the data): 2.67 for
+three other rigs of three runs, 2.24 for seven of four, 1.97 for fifty of 52. Without other
+rigs' changes (one rig, or estimates that are not all positive: a friction fitted to zero) or
+with a baseline or latest value <= 0, only the first test applies.
 
 Only fits of one model are compared: where a fit chose the larger model its job's nests in
 (``fitted_model``: hframe-8-current-limit for an hframe-8 job whose records a current limit
@@ -30,6 +36,7 @@ kept different models.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
@@ -41,6 +48,14 @@ import pandas as pd
 #: Default drift threshold: a 10 % change (belt stiffness, friction, motor gain).
 DEFAULT_THRESHOLD = 0.1
 Z95 = 1.959963984540054
+#: A normal sample's std over its median absolute deviation from 0 (1 / Phi^-1(3/4)).
+MAD_TO_STD = 1.4826
+#: Draws of a healthy fleet that set the scatter test's critical value, and their seed: the
+#: quantile's Monte Carlo error is then about 1 % (binomial, 95 % quantile).
+NULL_DRAWS = 20_000
+NULL_SEED = 20070501
+#: Largest draws x changes array formed at once (8 bytes each).
+NULL_CHUNK = 2_000_000
 _ESTIMATE = re.compile(r"^(?P<name>[A-Za-z_][A-Za-z0-9_]*) \[(?P<unit>[^\]]*)\]$")
 
 
@@ -62,6 +77,8 @@ class Drift:
     scatter: float = math.nan
     #: ln(latest / baseline) / (sqrt(2) sigma) (nan without a scatter)
     z_scatter: float = math.nan
+    #: the 95 % critical value of |z_scatter| (``scatter_critical_value``; nan: none)
+    scatter_critical: float = math.nan
 
     def as_dict(self) -> dict:
         """The row as plain data (the ``--json`` shape)."""
@@ -135,12 +152,52 @@ def week_to_week_log_changes(values: pd.Series) -> list[float]:
     return [math.log(b / a) for a, b in itertools.pairwise(v) if a > 0 and b > 0]
 
 
+def positive_runs(values: pd.Series) -> tuple[bool, ...]:
+    """Per run, whether its estimate is > 0: the runs ``week_to_week_log_changes`` pairs."""
+    return tuple(bool(v > 0) for v in values.to_numpy(dtype=float))
+
+
+@functools.lru_cache(maxsize=256)
+def scatter_critical_value(others: tuple[tuple[bool, ...], ...], confidence: float = 0.95) -> float:
+    """The critical value c of |z_scatter| at ``confidence`` (module docstring) for other rigs
+    whose runs are ``others`` (per rig, ``positive_runs``, sorted: rigs are exchangeable).
+
+    Under a healthy fleet every estimate is its rig's value times exp(sigma e), e independent
+    standard normal. The statistic is scale-free, so sigma = 1: per draw, the other rigs'
+    week-to-week changes e_w+1 - e_w (where both runs are positive, as in the data), the
+    judged rig's change e_latest - e_baseline (two independent estimates), and
+    |e_latest - e_baseline| / (1.4826 median |e_w+1 - e_w|); c is the ``confidence`` quantile
+    over ``NULL_DRAWS`` draws (``default_rng(NULL_SEED)``). inf without any change.
+    """
+    pairs = [
+        (start + w, start + w + 1)
+        for start, runs in zip(
+            itertools.accumulate((len(r) for r in others), initial=0), others, strict=False
+        )
+        for w, (a, b) in enumerate(itertools.pairwise(runs))
+        if a and b
+    ]
+    if not pairs:
+        return math.inf
+    first, second = (np.array(p) for p in zip(*pairs, strict=True))
+    n_runs = sum(len(r) for r in others)
+    rng = np.random.default_rng(NULL_SEED)
+    statistics = []
+    chunk = max(1, NULL_CHUNK // n_runs)
+    for done in range(0, NULL_DRAWS, chunk):
+        e = rng.standard_normal((min(chunk, NULL_DRAWS - done), n_runs))
+        scale = MAD_TO_STD * np.median(np.abs(e[:, second] - e[:, first]), axis=1)
+        judged = np.abs(rng.standard_normal(e.shape[0]) - rng.standard_normal(e.shape[0]))
+        statistics.append(judged / scale)
+    return float(np.quantile(np.concatenate(statistics), confidence))
+
+
 def fleet_scatter(changes_of_other_rigs: list[float]) -> float:
     """A healthy estimate's relative scatter sigma from week-to-week log-changes (module
     docstring): 1.4826 median |d| / sqrt(2); nan without any."""
     if not changes_of_other_rigs:
         return math.nan
-    return 1.4826 * float(np.median(np.abs(changes_of_other_rigs))) / math.sqrt(2)
+    return MAD_TO_STD * float(np.median(np.abs(changes_of_other_rigs))) / math.sqrt(2)
 
 
 def drift_table(frame: pd.DataFrame, threshold: float = DEFAULT_THRESHOLD) -> list[Drift]:
@@ -154,18 +211,23 @@ def drift_table(frame: pd.DataFrame, threshold: float = DEFAULT_THRESHOLD) -> li
         log_changes = {
             rig: week_to_week_log_changes(runs[value]) for rig, (_, runs) in compared.items()
         }
+        positive = {rig: positive_runs(runs[value]) for rig, (_, runs) in compared.items()}
         for rig, runs in usable.items():
             if len(runs) < 2:
                 continue
             others = [d for other, ds in log_changes.items() if other != rig for d in ds]
-            rows.append(
-                _drift(rig, name, unit, runs[value], runs[std], fleet_scatter(others), threshold)
+            critical = scatter_critical_value(
+                tuple(sorted(p for other, p in positive.items() if other != rig))
             )
+            fleet = (fleet_scatter(others), critical)
+            rows.append(_drift(rig, name, unit, runs[value], runs[std], fleet, threshold))
     return sorted(rows, key=lambda d: d.rig)
 
 
-def _drift(rig, name, unit, values, stds, scatter: float, threshold: float) -> Drift:
-    """The baseline (first) and latest (last) of a rig's ``values`` judged (module docstring)."""
+def _drift(rig, name, unit, values, stds, fleet: tuple[float, float], threshold: float) -> Drift:
+    """The baseline (first) and latest (last) of a rig's ``values`` judged (module docstring);
+    ``fleet``: the fleet's scatter sigma and the critical value of its test."""
+    scatter, critical = fleet
     first, last = float(values.iloc[0]), float(values.iloc[-1])
     change = _relative_change(first, last)
     spread = math.hypot(float(stds.iloc[-1]), float(stds.iloc[0]))
@@ -175,7 +237,7 @@ def _drift(rig, name, unit, values, stds, scatter: float, threshold: float) -> D
     if scatter > 0 and first > 0 and last > 0:
         z_scatter = math.log(last / first) / (math.sqrt(2) * scatter)
     # nan (no scatter to judge against) leaves the decision to the first two tests
-    flagged = abs(change) >= threshold and abs(z) > Z95 and not abs(z_scatter) <= Z95
+    flagged = abs(change) >= threshold and abs(z) > Z95 and not abs(z_scatter) <= critical
     return Drift(
         rig,
         name,
@@ -188,4 +250,5 @@ def _drift(rig, name, unit, values, stds, scatter: float, threshold: float) -> D
         bool(flagged),
         scatter,
         z_scatter,
+        critical if math.isfinite(z_scatter) else math.nan,
     )

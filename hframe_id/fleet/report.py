@@ -98,7 +98,17 @@ def change_view(changes: list[float], threshold: float) -> tuple[float, float]:
 def flags_table(drifts: list[Drift]) -> list[list[str]]:
     """Header and one row per flagged (rig, parameter)."""
     rows = [
-        ["rig", "parameter", "baseline", "latest", "change [%]", "z", "fleet scatter [%]", "runs"]
+        [
+            "rig",
+            "parameter",
+            "baseline",
+            "latest",
+            "change [%]",
+            "z",
+            "fleet scatter [%]",
+            "z against it (critical)",
+            "runs",
+        ]
     ]
     for d in drifts:
         if d.flagged:
@@ -111,6 +121,9 @@ def flags_table(drifts: list[Drift]) -> list[list[str]]:
                     f"{100 * d.change:+.1f}",
                     f"{d.z:+.1f}",
                     "-" if math.isnan(d.scatter) else f"{100 * d.scatter:.1f}",
+                    "-"
+                    if math.isnan(d.z_scatter)
+                    else f"{d.z_scatter:+.2f} ({d.scatter_critical:.2f})",
                     str(d.runs),
                 ]
             )
@@ -148,6 +161,9 @@ def summary(
                 "z": d.z,
                 "scatter": None if math.isnan(d.scatter) else d.scatter,
                 "z_scatter": None if math.isnan(d.z_scatter) else d.z_scatter,
+                "scatter_critical": (
+                    None if math.isnan(d.scatter_critical) else d.scatter_critical
+                ),
             }
             for d in drifts
             if d.flagged
@@ -178,7 +194,8 @@ def write_markdown(
         f"of the latest run against the rig's first of at least {100 * report['threshold']:g} "
         "% with the 95 % interval of the difference excluding zero, and standing out at 95 % "
         "against the other rigs' week-to-week scatter (fleet scatter: relative std of a "
-        "healthy estimate).",
+        "healthy estimate; critical: the 95 % critical value of |z| against a scatter "
+        "estimated from that few changes).",
         "",
         "## Flagged",
         "",

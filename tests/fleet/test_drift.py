@@ -8,8 +8,10 @@ import pandas as pd
 import pytest
 
 from hframe_id.fleet.drift import (
+    Z95,
     drift_table,
     fleet_scatter,
+    scatter_critical_value,
     structure_changes,
     week_to_week_log_changes,
 )
@@ -153,3 +155,33 @@ def test_a_rigs_own_aging_does_not_widen_its_yardstick():
 def test_without_other_rigs_the_interval_alone_decides():
     (drift,) = drift_table(pd.DataFrame(_history("rig-01", [100.0, 70.0])))
     assert math.isnan(drift.scatter) and drift.flagged
+
+
+def test_the_scatter_tests_critical_value_is_that_of_its_estimated_sigma():
+    # Many changes: sigma is known, the normal 1.96 (the Monte Carlo quantile of 20,000
+    # draws is within about 1 %); a few: larger, and larger the fewer they are.
+    many = scatter_critical_value(((True,) * 52,) * 50)
+    assert many == pytest.approx(Z95, rel=0.02)
+    three_rigs = scatter_critical_value(((True,) * 3,) * 3)
+    assert Z95 * 1.2 < three_rigs < scatter_critical_value(((True,) * 3,) * 2)
+    # A run whose estimate is not positive breaks its two changes, as in the data.
+    gap = scatter_critical_value(((True, False, True), (True,) * 3, (True,) * 3))
+    assert gap > three_rigs
+    assert scatter_critical_value(((True,),)) == math.inf
+
+
+def test_a_change_past_196_but_within_the_critical_value_is_not_flagged():
+    # Three healthy rigs scatter +/-10 % between weeks; rig-04 moves -28 %: z_scatter
+    # ln(0.72) / (1.4826 x 0.0953) = -2.32 against sigma from six changes, past 1.96, not
+    # past their critical value (2.67).
+    drifts = _drifts(
+        {
+            "rig-01": [100.0, 110.0, 100.0],
+            "rig-02": [100.0, 90.0, 100.0],
+            "rig-03": [100.0, 110.0, 100.0],
+            "rig-04": [100.0, 95.0, 72.0],
+        }
+    )
+    rig4 = drifts["rig-04"]
+    assert -rig4.scatter_critical < rig4.z_scatter < -Z95
+    assert not rig4.flagged
