@@ -93,9 +93,13 @@ def fit(recordings: list[Path], out_dir: Path) -> dict:
 
 
 def relative_std(fitted: dict, names: list[str]) -> dict[str, float]:
-    """Per free parameter the fit's standard error over its value [-] (inf if none)."""
+    """Per free parameter the fit's standard error over its value [-] (inf if none); a name
+    the fit's model does not have (``I_max`` when the six steps' fit kept the current-limit
+    model and this one hframe-8) is left out."""
     result = {}
     for name in names:
+        if name not in fitted["parameters"]:
+            continue
         entry = fitted["parameters"][name]
         std, value = entry.get("std"), entry.get("value")
         result[name] = abs(std / value) if std is not None and value else float("inf")
@@ -182,10 +186,12 @@ def check_plant(seed: int | None, work: Path) -> dict:
             "fit_message": result.get("message"),
             "residual_rms": {c: v.get("residual_rms") for c, v in result["channels"].items()},
             "relative_std": relative_std(result, names),
-            "std_error": {n: result["parameters"][n].get("std") for n in names},
+            "std_error": {
+                n: result["parameters"][n].get("std") for n in names if n in result["parameters"]
+            },
         }
         if predicted is not None:
-            row[label]["predicted_std_error"] = {n: predicted[n] for n in names}
+            row[label]["predicted_std_error"] = {n: predicted[n] for n in names if n in predicted}
     return row
 
 
@@ -198,7 +204,8 @@ def verdicts(row: dict) -> dict:
     median["steps"] = float(np.median(list(row["steps"].values())))
     ratios = np.array(
         [row["design"]["predicted_std_error"][n] / s if s else np.inf
-         for n, s in row["design"]["std_error"].items()]
+         for n, s in row["design"]["std_error"].items()
+         if n in row["design"]["predicted_std_error"]]
     )  # fmt: skip
     inside = (ratios >= 1 / PREDICTION_FACTOR) & (ratios <= PREDICTION_FACTOR)
     focus = {
