@@ -330,12 +330,19 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
     doc = load_yaml(text, str(path), ParameterFileError)
     if not isinstance(doc, dict) or not isinstance(doc.get("datasets"), list):
         raise ParameterFileError(f"{path}: a manifest needs a 'datasets' list")
-    for entry in doc["datasets"]:
+    for number, entry in enumerate(doc["datasets"], start=1):
         if not isinstance(entry, dict):
             raise ParameterFileError(f"{path}: entry {shown(entry)} is not a mapping")
         missing = [k for k in ("file", "sha256", "truth", "seed") if k not in entry]
         if missing:
             raise ParameterFileError(f"{path}: entry {shown(entry)} lacks {', '.join(missing)}")
+        for key in ("file", "truth", "reference", "sha256", "truth_sha256", "reference_sha256"):
+            value = entry.get(key)
+            if key in entry and (not isinstance(value, str) or not value.strip()):
+                kind = "a sha256 digest" if key.endswith("sha256") else "a file name"
+                raise ParameterFileError(
+                    f"{path}: dataset {number}: {key} must be {kind}, got {shown(value)}"
+                )
     return doc
 
 
@@ -358,6 +365,8 @@ def verify_datasets(folder: str | Path) -> list[str]:
             path = folder / name
             if not path.exists():
                 problems.append(f"{path}: missing")
+            elif not path.is_file():
+                problems.append(f"{path}: not a file")
             elif digest and sha256_file(path) != digest:
                 problems.append(f"{path}: sha256 differs from the manifest")
     return problems

@@ -376,6 +376,32 @@ def test_datasets_verify_names_each_file_once(work, capsys):
     assert line.count("hframe-8-rig.yaml: missing") == 1
 
 
+@pytest.mark.parametrize(
+    ("entry", "named"),
+    [
+        ("file: 123\n  sha256: ab", "file must be a file name, got 123"),
+        ("file: {a: 1}\n  sha256: ab", "file must be a file name"),
+        ("file: r.mcap\n  sha256: [1]", "sha256 must be a sha256 digest"),
+        ("file: r.mcap\n  sha256: ab\n  reference:", "reference must be a file name, got None"),
+    ],
+    ids=["file-number", "file-mapping", "digest-list", "reference-empty"],
+)
+def test_datasets_verify_a_manifest_entry_of_the_wrong_type(work, capsys, entry, named):
+    """A dataset's file, truth or digest that is not text ended in a TypeError traceback."""
+    (work / "manifest.yaml").write_text(
+        f"datasets:\n- {entry}\n  truth: truth/t.yaml\n  truth_sha256: ab\n  seed: 1\n"
+    )
+    refused(["datasets", "verify", "--dir", work], capsys, "manifest.yaml", "dataset 1", named)
+
+
+def test_datasets_verify_a_listed_folder_is_not_a_file(work, capsys):
+    (work / "sub").mkdir()
+    (work / "manifest.yaml").write_text(
+        "datasets:\n- {file: sub, sha256: ab, truth: sub, truth_sha256: ab, seed: 1}\n"
+    )
+    refused(["datasets", "verify", "--dir", work], capsys, "sub: not a file")
+
+
 def test_a_zero_filled_recording_is_refused_at_once(work, capsys):
     """The MCAP magic and then 200 MB of zeros (sparse): walked as 9-byte records for over
     two minutes; a record of opcode 0 ends the readable part at once."""
