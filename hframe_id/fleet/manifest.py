@@ -124,7 +124,15 @@ def _yaml_entries(path: Path, text: str) -> list[dict[str, Any]]:
 
 
 def _csv_entries(path: Path, text: str) -> list[dict[str, Any]]:
-    rows = list(csv.DictReader(text.splitlines()))
+    reader = csv.DictReader(text.splitlines())
+    try:
+        rows = list(reader)
+    except csv.Error as err:  # a cell beyond the csv module's 128 kB limit, say
+        raise ManifestError(f"{path}: not a readable CSV manifest ({err})") from None
+    header = reader.fieldnames or []
+    doubled = sorted({name for name in header if header.count(name) > 1})
+    if doubled:  # DictReader keeps the last column of a name, silently
+        raise ManifestError(f"{path}: line 1: the header has column {shown(doubled[0])} twice")
     entries = []
     for row in rows:
         if None in row:

@@ -151,6 +151,30 @@ def test_a_key_given_twice_in_a_manifest(work, capsys):
     assert _listing(work) == before
 
 
+@pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        (
+            f"rig,rig,time,recordings,model\na,b,2026-01-05T08:00:00+00:00,{REC},hframe-8\n",
+            "column 'rig' twice",
+        ),
+        (
+            "rig,time,recordings,model\na," + "x" * 200_000 + ",r.mcap,hframe-8\n",
+            "field larger than field limit",
+        ),
+    ],
+    ids=["column-twice", "cell-beyond-the-csv-limit"],
+)
+def test_a_csv_manifest_the_csv_module_cannot_take_as_it_is(work, capsys, text, named):
+    """A column given twice took its last cell without a word (rig 'b' fitted); a cell of
+    200 kB ended in a csv.Error traceback."""
+    manifest = work / "manifest.csv"
+    manifest.write_text(text)
+    argv = ["batch", manifest, "--results", "r.parquet", "--workers", "1"]
+    refused(argv, capsys, manifest, named)
+    assert not (work / "r.parquet").exists()
+
+
 def test_a_huge_value_is_echoed_shortened(work, capsys):
     huge = "9" * 100_000
     path = _parameter_file(
