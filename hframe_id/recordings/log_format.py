@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 from collections.abc import Mapping
 from typing import Any
 
@@ -292,9 +293,13 @@ def _parse_scalar(text: str) -> Any:
     if text in ("true", "false"):
         return text == "true"
     try:
-        return int(text)
+        value = int(text)
     except ValueError:
         pass
+    else:
+        # an integer beyond any float stays text: math.isfinite and float() raised an
+        # OverflowError on it in every check of a number (rig.encoder_counts_per_rev)
+        return value if abs(value) <= sys.float_info.max else text
     try:
         value = float(text)
     except ValueError:

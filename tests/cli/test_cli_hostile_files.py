@@ -248,14 +248,18 @@ def test_an_integer_beyond_any_float_in_yaml(work, capsys, argv):
         ("encoder_counts_per_rev", "0", "must be a number >= 1, got 0"),
         ("laser_noise_std_m", "nan", "must be a number >= 0, got nan"),
         ("dac_min_v", "20", "must be a number below rig.dac_max_v"),
+        ("encoder_counts_per_rev", "1" + "0" * 400, "must be a number >= 1, got '100"),
+        ("limit_x_max_m", "1" + "0" * 400, "must be a number below rig.limit_x_max_m '100"),
     ],
 )
 def test_rig_metadata_out_of_range(work, capsys, key, value, problem):
     """A recording's numeric rig metadata are range-checked when it is read (0 counts per
-    revolution was a ZeroDivisionError traceback in the fitter)."""
+    revolution was a ZeroDivisionError traceback in the fitter, an integer beyond any float
+    an OverflowError traceback in the check itself)."""
     path = _recording(work / "rig.mcap", lambda i, m: m, rig={key: value})
     refused(["fit", path, "--out-dir", "fits"], capsys, path, f"rig.{key}", problem)
     assert _listing(work) == {"rig.mcap"}
+    refused(["inspect", path], capsys, path, f"rig.{key}", problem)
 
 
 def test_a_named_pipe_without_writer_is_not_waited_on(work, capsys):
