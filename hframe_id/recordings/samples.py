@@ -62,10 +62,11 @@ def decode_rig_samples(
     output_names = fmt.split_list(rig["outputs"])
     bad_inputs = [n for n in input_names if n not in ("u1", "u2")]
     bad_outputs = [n for n in output_names if n not in ENCODER_OUTPUTS + LASER_OUTPUTS]
-    if not input_names or bad_inputs or not output_names or bad_outputs:
+    twice = len(set(input_names)) < len(input_names) or len(set(output_names)) < len(output_names)
+    if not input_names or bad_inputs or not output_names or bad_outputs or twice:
         raise LogFormatError(
             f"{where}: rig.inputs {shown(rig['inputs'])} / rig.outputs "
-            f"{shown(rig['outputs'])} must name u1, u2 and phi1, phi2, x, y"
+            f"{shown(rig['outputs'])} must name u1, u2 and phi1, phi2, x, y, each once"
         )
     _check_fields(where, messages, _RIG_SAMPLE_VALIDATOR)
     sequence, device_time_us = _clock(where, messages)

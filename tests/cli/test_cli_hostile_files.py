@@ -250,12 +250,14 @@ def test_an_integer_beyond_any_float_in_yaml(work, capsys, argv):
         ("dac_min_v", "20", "must be a number below rig.dac_max_v"),
         ("encoder_counts_per_rev", "1" + "0" * 400, "must be a number >= 1, got '100"),
         ("limit_x_max_m", "1" + "0" * 400, "must be a number below rig.limit_x_max_m '100"),
+        ("outputs", "phi1,phi1,x,y", "must name u1, u2 and phi1, phi2, x, y, each once"),
     ],
 )
 def test_rig_metadata_out_of_range(work, capsys, key, value, problem):
     """A recording's numeric rig metadata are range-checked when it is read (0 counts per
     revolution was a ZeroDivisionError traceback in the fitter, an integer beyond any float
-    an OverflowError traceback in the check itself)."""
+    an OverflowError traceback in the check itself, an output named twice was shown twice by
+    inspect, with the same data)."""
     path = _recording(work / "rig.mcap", lambda i, m: m, rig={key: value})
     refused(["fit", path, "--out-dir", "fits"], capsys, path, f"rig.{key}", problem)
     assert _listing(work) == {"rig.mcap"}
