@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 
-from hframe_id.cli.outputs import check_file, written_together
+from hframe_id.cli.outputs import check_file, check_length, written_together
 from hframe_id.cli.progress import Progress
 from hframe_id.control.trajectory import SQUARE_F_A, SQUARE_SIDE_M, SQUARE_V_MAX_M_PER_S
 from hframe_id.errors import ControllerError, OptionError
@@ -51,6 +51,14 @@ def check_options(args: argparse.Namespace) -> None:
             f"{flags}: for the H-frame PID (--kp ...); a declared controller has its own "
             "gains and timing, and --plot draws the H-frame's figures (use --csv)"
         )
+
+
+def check_loop_length(controller, recording, option: str) -> None:
+    """Refuse, before any work, a closed loop of more than ``MAX_SAMPLES`` samples of the
+    controller's period over ``recording`` (a sample period function giving 1e-12 s asked
+    for 181 TiB of time stamps, an ArrayMemoryError traceback)."""
+    duration_s = float(recording.time_s[-1] - recording.time_s[0])
+    check_length(duration_s, controller.sample_period(recording), option)
 
 
 def summary(model, controller, run, recording) -> dict:
@@ -120,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
         check_file(args.csv, "--csv", args.force)
     controller = load_controller_file(args.controller)
     recording = read_recording(resolve_dataset(str(args.reference)))
+    check_loop_length(controller, recording, f"--controller {args.controller}")
     params = load_parameter_file(args.params, args.variant)
     model = build_model(params.variant)
     p = model.parameter_vector(params.values)

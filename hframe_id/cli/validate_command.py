@@ -149,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
 
     given = {k: getattr(args, k) for k in HELP_DEFAULTS if getattr(args, k) is not None}
     if args.controller is not None:
+        from hframe_id.cli.declared_control import check_loop_length
         from hframe_id.control import load_controller_file
 
         given["controller"] = load_controller_file(args.controller)
@@ -157,6 +158,8 @@ def run(args: argparse.Namespace) -> int:
     recordings = _read(args.recordings)
     for name, recording in zip(args.recordings, recordings, strict=True):
         _check_lengths(options, name, len(recording.time_s))
+        if options.controller is not None:
+            check_loop_length(options.controller, recording, f"--controller {args.controller}")
     plot_dir = None
     if args.plot is not None:
         names = plot_names([r.name() for r in recordings], labels_of(parameter_sets))

@@ -35,7 +35,7 @@ import numpy as np
 from hframe_id.errors import ControllerError, ModelError
 from hframe_id.models.declaration import check_name
 from hframe_id.models.spec import Signal
-from hframe_id.models.user import DeclaredSymbols
+from hframe_id.models.user import DeclaredSymbols, guarded
 
 if TYPE_CHECKING:
     from hframe_id.recordings.recording import Recording
@@ -133,7 +133,13 @@ class ControllerDeclaration:
         period = self.sample_period_s
         if period is None:
             return float(recording.sample_period_s)
-        value = period(recording) if callable(period) else period
+        if callable(period) and self.controller_file is not None:
+            # the file's code, run again for each recording: however it ends, one line
+            when = "in its sample period function"
+            with guarded(self.controller_file, "controller file", ControllerError, when):
+                value = period(recording)
+        else:
+            value = period(recording) if callable(period) else period
         if not _positive(value):
             raise ControllerError(f"{self.where}: sample period must be > 0 s, got {value!r}")
         return float(value)

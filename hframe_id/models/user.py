@@ -256,8 +256,11 @@ def _signal_handling_kept() -> Iterator[None]:
 
 
 @contextmanager
-def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iterator[None]:
-    """Run a model or controller file's code (``kind``: ``"model file"``, ...) so that every
+def guarded(
+    path: Path, kind: str, error: type[ModelError] = ModelError, when: str = "while loaded"
+) -> Iterator[None]:
+    """Run a model or controller file's code (``kind``: ``"model file"``, ...; ``when`` it
+    runs, for the message: loaded, or one of its functions called later) so that every
     way it can end and come back to Python is one ``error`` naming the file: an exception
     (with the file's line; any ``BaseException``, ``GeneratorExit`` too), ``sys.exit`` (any
     status, 0 too) or a ``KeyboardInterrupt`` it raises itself. The user's own Ctrl-C or
@@ -271,11 +274,11 @@ def guarded(path: Path, kind: str, error: type[ModelError] = ModelError) -> Iter
         message = str(err)
         raise error(message if str(path) in message else f"{path}: {message}") from None
     except SystemExit as err:
-        raise error(f"{kind} {path}: calls sys.exit({shown(err.code)}) while loaded") from None
+        raise error(f"{kind} {path}: calls sys.exit({shown(err.code)}) {when}") from None
     except Interrupted:
         raise
     except KeyboardInterrupt:
-        raise error(f"{kind} {path}: raises KeyboardInterrupt while loaded") from None
+        raise error(f"{kind} {path}: raises KeyboardInterrupt {when}") from None
     except BaseException as err:  # GeneratorExit too: a BaseException of its own
         raise error(f"{kind} {path}: {error_line(err, path)}") from None
 

@@ -270,3 +270,40 @@ def test_a_model_file_ignoring_ctrl_c_cannot_keep_the_command_running(tmp_path):
     assert process.returncode == 130, err
     assert err.strip().splitlines()[-1] == "hframe-id: interrupted: SIGINT received"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["deaf.py", EMPS_PARAMS.name]
+
+
+EMPS_CONTROLLER = ROOT / "models" / "emps_controller.py"
+EMPS_RECORDING = ROOT / "datasets" / "real" / "emps-estimation.mcap"
+
+
+@pytest.mark.parametrize(
+    ("body", "words"),
+    [
+        ("raise SystemExit(4)", ("calls sys.exit(4) in its sample period function",)),
+        ("raise KeyboardInterrupt", ("raises KeyboardInterrupt in its sample period function",)),
+        ("raise ValueError('no period')", ("ValueError (line", "no period")),
+        ("return 1e-12", ("--controller", "2.48e+13 samples; at most 10,000,000")),
+    ],
+    ids=["exit-4", "keyboard-interrupt", "exception", "too-short"],
+)
+@pytest.mark.parametrize("command", ["control", "validate"])
+def test_a_controllers_sample_period_function_ending_is_one_line(
+    tmp_path, capsys, body, words, command
+):
+    """The sample period function runs when the closed loop is set up, after the load: its
+    sys.exit(4) ended the command with status 4 and no word, its KeyboardInterrupt read as
+    the user's Ctrl-C (status 130), an exception and a period of 1e-12 s (181 TiB of time
+    stamps) were tracebacks."""
+    source = EMPS_CONTROLLER.read_text()
+    default = "    return BENCHMARK_SAMPLE_TIMES_S.get(source, recording.sample_period_s)"
+    assert default in source
+    controller = tmp_path / "controller.py"
+    controller.write_text(source.replace(default, f"    {body}"))
+    argv = [command, "--params", EMPS_PARAMS, "--model-file", EMPS_MODEL]
+    if command == "control":
+        argv += ["--controller", controller, "--reference", EMPS_RECORDING]
+    else:
+        argv = [command, EMPS_PARAMS, EMPS_RECORDING, "--model-file", EMPS_MODEL]
+        argv += ["--controller", controller, "--horizon", "0"]
+    refused([*argv, "--quiet"], capsys, controller, *words)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["controller.py"]
