@@ -36,11 +36,11 @@ from hframe_id.control.declaration import (
     Gain,
     Law,
     SamplePeriod,
-    law_function,
+    traced_law,
 )
 from hframe_id.errors import ControllerError
 from hframe_id.models.spec import Signal
-from hframe_id.models.user import error_line, guarded, load_guarded, run_declaration_file
+from hframe_id.models.user import load_guarded, run_declaration_file
 
 
 def declare_controller(
@@ -96,11 +96,5 @@ def _load_controller_file(path: Path) -> ControllerDeclaration:
             f"(found {type(declared).__name__})"
         )
     declared = replace(declared, source=str(path), controller_file=path)
-    with guarded(path, "controller file", ControllerError):
-        try:
-            law_function(declared, CHECK_PERIOD_S)
-        except (ControllerError, KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as err:
-            raise ControllerError(f"controller file {path}: law: {error_line(err, path)}") from None
+    traced_law(declared, CHECK_PERIOD_S)
     return declared

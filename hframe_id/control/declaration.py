@@ -35,7 +35,7 @@ import numpy as np
 from hframe_id.errors import ControllerError, ModelError
 from hframe_id.models.declaration import check_name
 from hframe_id.models.spec import Signal
-from hframe_id.models.user import DeclaredSymbols, guarded
+from hframe_id.models.user import DeclaredSymbols, error_line, guarded
 
 if TYPE_CHECKING:
     from hframe_id.recordings.recording import Recording
@@ -256,6 +256,25 @@ def _expressions(
 
 
 @lru_cache(maxsize=32)
+def traced_law(
+    declaration: ControllerDeclaration, sample_period_s: float, when: str = "while loaded"
+) -> ca.Function:
+    """``law_function``; for a controller file, its law run under ``guarded`` (``when``, for
+    the message): however the file's code ends, one ``ControllerError`` naming the file. The
+    loader traces the law at ``CHECK_PERIOD_S``, a closed loop again at its own period, where
+    a law's ``sys.exit`` ended the command with its status and no word."""
+    path = declaration.controller_file
+    if path is None:  # declared in Python: its errors are the caller's
+        return law_function(declaration, sample_period_s)
+    with guarded(path, "controller file", ControllerError, when):
+        try:
+            return law_function(declaration, sample_period_s)
+        except (ControllerError, KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as err:
+            raise ControllerError(f"controller file {path}: law: {error_line(err, path)}") from None
+
+
 def law_function(declaration: ControllerDeclaration, sample_period_s: float) -> ca.Function:
     """The law as a CasADi function (y, r, z, g) -> (c, z_next) at sample period T [s].
 

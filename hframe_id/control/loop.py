@@ -24,7 +24,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hframe_id.control.declaration import ControllerDeclaration, law_function
+from hframe_id.control.declaration import ControllerDeclaration, traced_law
 from hframe_id.errors import ControllerError
 from hframe_id.models import Model
 from hframe_id.recordings.recording import Recording
@@ -99,7 +99,7 @@ def loop_step(
     gains; u is the plant input over [t_k, t_{k+1}) [model input units], qddot the plant's
     accelerations at t_k under it, c the commands the law computed at t_k.
     """
-    law = law_function(controller, dt)
+    law = traced_law(controller, dt, f"in its law at the loop's period ({dt:g} s)")
     n_x, n_u = model.n_states, model.n_inputs
     n_z, delay = law.size1_in(2), controller.delay_samples
     z = ca.SX.sym("z", n_x + n_z + delay * n_u)

@@ -307,3 +307,28 @@ def test_a_controllers_sample_period_function_ending_is_one_line(
         argv += ["--controller", controller, "--horizon", "0"]
     refused([*argv, "--quiet"], capsys, controller, *words)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["controller.py"]
+
+
+@pytest.mark.parametrize(
+    ("code", "words"),
+    [
+        ("raise SystemExit(7)", ("calls sys.exit(7) in its law at the loop's period",)),
+        ("raise KeyboardInterrupt", ("raises KeyboardInterrupt in its law at the loop's period",)),
+        ("raise ValueError('period')", ("law: ValueError (line", "period")),
+    ],
+    ids=["exit-7", "keyboard-interrupt", "exception"],
+)
+def test_a_controllers_law_ending_at_the_loops_period_is_one_line(tmp_path, capsys, code, words):
+    """The loader traces the law at 1 ms; the closed loop traces it again at the recording's
+    period (0.99998 ms for the EMPS file), where its ending was not guarded: exit status 7
+    without a word, a Ctrl-C, or a traceback."""
+    source = EMPS_CONTROLLER.read_text()
+    first = '    q = y["qm"]\n'
+    assert first in source
+    controller = tmp_path / "controller.py"
+    controller.write_text(
+        source.replace(first, f"    if sample_period_s != 1e-3:\n        {code}\n" + first)
+    )
+    argv = ["control", "--params", EMPS_PARAMS, "--model-file", EMPS_MODEL]
+    argv += ["--controller", controller, "--reference", EMPS_RECORDING, "--quiet"]
+    refused(argv, capsys, controller, *words)
