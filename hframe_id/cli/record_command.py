@@ -50,7 +50,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         rig,
         "--watchdog-ms",
         int,
-        above=0,
+        at_least=1,
+        at_most=60_000,  # the device's limit (SerialRig), checked before the port is opened
         default=50,
         help="serial: device watchdog, 0 V after this long without a command (default 50)",
     )

@@ -33,6 +33,11 @@ def work(tmp_path, monkeypatch) -> Path:
         (["--protocol", "multisine", "--rms", "nan"], "--rms", "nan"),
         (["--protocol", "multisine", "--band", "0.5", "5000"], "--band", "Nyquist frequency 500"),
         (["--protocol", "multisine", "--duration", "0.1"], "--duration", "one --period 2 s"),
+        (
+            ["--rig", "serial", "--port", "/dev/null", "--watchdog-ms", "99999"],
+            "--watchdog-ms",
+            "<= 60000",
+        ),
     ],
 )
 def test_record_option_out_of_range(work, capsys, extra, option, value):
