@@ -66,24 +66,47 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     proto.add_argument("--protocol", choices=("step", "pulse", "csv", "multisine"), default="step")
     add_number(proto, "--v1", help="step: motor 1 voltage [V]")
     add_number(proto, "--v2", help="step: motor 2 voltage [V] (H-frame)")
-    add_number(proto, "--step", above=0, default=0.5, help="step: duration [s] (0.5)")
+    add_number(
+        proto, "--step", above=0, default=_OWN["step"]["step"], help="step: duration [s] (0.5)"
+    )
     add_number(proto, "--amplitude", help="pulse: voltage [V]")
-    add_number(proto, "--width", above=0, default=0.25, help="pulse: duration [s] (0.25)")
-    add_number(proto, "--motor", int, at_least=1, default=1, help="pulse: motor (1)")
+    add_number(
+        proto, "--width", above=0, default=_OWN["pulse"]["width"], help="pulse: duration [s] (0.25)"
+    )
+    add_number(
+        proto, "--motor", int, at_least=1, default=_OWN["pulse"]["motor"], help="pulse: motor (1)"
+    )
     proto.add_argument("--csv", type=Path, help="csv: file with 'time [s],u1 [V][,u2 [V]]'")
-    add_number(proto, "--rms", above=0, default=3.0, help="multisine: RMS per motor [V] (3)")
+    add_number(
+        proto,
+        "--rms",
+        above=0,
+        default=_OWN["multisine"]["rms"],
+        help="multisine: RMS per motor [V] (3)",
+    )
     add_number(
         proto,
         "--band",
         above=0,
         nargs=2,
-        default=(0.5, 10.0),
+        default=_OWN["multisine"]["band"],
         metavar=("F_MIN", "F_MAX"),
         help="multisine: frequency band [Hz] (0.5 10)",
     )
-    add_number(proto, "--period", above=0, default=2.0, help="multisine: period [s] (2)")
     add_number(
-        proto, "--protocol-seed", int, at_least=0, default=0, help="multisine: phase seed (0)"
+        proto,
+        "--period",
+        above=0,
+        default=_OWN["multisine"]["period"],
+        help="multisine: period [s] (2)",
+    )
+    add_number(
+        proto,
+        "--protocol-seed",
+        int,
+        at_least=0,
+        default=_OWN["multisine"]["protocol_seed"],
+        help="multisine: phase seed (0)",
     )
     add_number(
         proto,
@@ -97,7 +120,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         proto,
         "--pre-roll",
         at_least=0,
-        default=0.05,
+        default=_PRE_ROLL_S,
         help="step/pulse/multisine: 0 V recorded before the excitation [s] (0.05)",
     )
     out = parser.add_argument_group("output")
@@ -119,6 +142,32 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+#: Each protocol's own options (attribute: default); the pre-roll is every one's but csv's.
+#: One given to another protocol is refused, not silently ignored (``--protocol multisine
+#: --v1 5`` recorded a 3 V rms multisine).
+_OWN: dict[str, dict[str, object]] = {
+    "step": {"v1": None, "v2": None, "step": 0.5},
+    "pulse": {"amplitude": None, "width": 0.25, "motor": 1},
+    "csv": {"csv": None},
+    "multisine": {"rms": 3.0, "band": (0.5, 10.0), "period": 2.0, "protocol_seed": 0},
+}
+_PRE_ROLL_S = 0.05
+
+
+def _check_own_options(args: argparse.Namespace) -> None:
+    """Refuse the options of another protocol than ``--protocol`` (``_OWN``)."""
+    others = {k: v for p, own in _OWN.items() if p != args.protocol for k, v in own.items()}
+    if args.protocol == "csv":
+        others["pre_roll"] = _PRE_ROLL_S  # the sequence has its own start
+    for name, default in others.items():
+        value = getattr(args, name)
+        if (tuple(value) if isinstance(value, list) else value) != default:
+            owner = next((p for p, own in _OWN.items() if name in own), "step, pulse, multisine")
+            raise OptionError(
+                f"--{name.replace('_', '-')} is for --protocol {owner}, not {args.protocol}"
+            )
+
+
 def _protocol(args: argparse.Namespace, n_inputs: int):
     from hframe_id.rig.protocols import (
         MultisineProtocol,
@@ -127,6 +176,7 @@ def _protocol(args: argparse.Namespace, n_inputs: int):
         load_sequence_csv,
     )
 
+    _check_own_options(args)
     duration = args.duration
     if args.protocol == "step":
         if args.v1 is None:

@@ -269,3 +269,22 @@ def test_fit_refuses_a_recording_given_twice(work, capsys):
     argv = ["fit", REC, "same.mcap", "--quiet", "--out-dir", "fits"]
     refused(argv, capsys, "recording same.mcap", "given twice", REC.name)
     assert sorted(p.name for p in work.iterdir()) == ["same.mcap"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "named"),
+    [
+        (["--protocol", "multisine", "--v1", "5"], "--v1 is for --protocol step, not multisine"),
+        (["--v1", "1", "--v2", "1", "--rms", "5"], "--rms is for --protocol multisine, not step"),
+        (["--v1", "1", "--v2", "1", "--band", "1", "5"], "--band is for --protocol multisine"),
+        (["--protocol", "pulse", "--amplitude", "1", "--step", "0.2"], "--step is for --protocol"),
+        (["--protocol", "csv", "--csv", "v.csv", "--pre-roll", "1"], "--pre-roll is for"),
+    ],
+    ids=["multisine-v1", "step-rms", "step-band", "pulse-step", "csv-pre-roll"],
+)
+def test_record_refuses_another_protocols_option(work, capsys, extra, named):
+    """An option of another protocol was silently ignored: ``--protocol multisine --v1 5``
+    recorded a multisine of the default 3 V rms."""
+    (work / "v.csv").write_text("time [s],u1 [V],u2 [V]\n0,1,1\n")
+    refused([*RECORD, *extra], capsys, named)
+    assert sorted(p.name for p in work.iterdir()) == ["v.csv"]
