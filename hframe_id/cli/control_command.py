@@ -152,9 +152,11 @@ def build_trajectory(args: argparse.Namespace):
     in the thesis) and to 0.2 s for points. Raises OptionError for options that do not fit.
     """
     if args.trajectory == "square":
-        if args.points is not None:
-            raise OptionError("--points is for --trajectory points")
+        if args.points is not None or args.dwell != 0.0:  # were ignored without a word
+            raise OptionError("--points and --dwell are for --trajectory points")
         return square(args.side, args.v_max, args.f_a, settle_s=args.settle or 0.0)
+    if args.side != SQUARE_SIDE_M:
+        raise OptionError("--side is for --trajectory square")
     settle = 0.2 if args.settle is None else args.settle
     return point_to_point(_points(args.points), args.v_max, args.f_a, args.dwell, settle)
 

@@ -257,6 +257,8 @@ def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id simulate``: open loop to CSV, optionally an MCAP recording and a plot."""
     import numpy as np
 
+    if args.mcap is None and args.seed != 0:  # was ignored without a word
+        raise OptionError("--seed is for --mcap (the sim rig's sensor noise)")
     plant, model = _load_plant(args)
     _check_writable(args)
     table, dt, source = _inputs(args, model.n_inputs)

@@ -58,6 +58,13 @@ def _counts_csv(folder: Path) -> Path:
     return path
 
 
+def test_simulate_seed_without_mcap(work, capsys):
+    """The sensor noise seed of --mcap's recording, ignored without a word when none is made."""
+    argv = ["simulate", "--params", H8, "--step", "1,1", "--duration", "0.1", "--out", "s.csv"]
+    refused([*argv, "--seed", "5"], capsys, "--seed is for --mcap")
+    assert list(work.iterdir()) == []
+
+
 def test_import_infinite_counts_per_rev(work, capsys):
     csv = _counts_csv(work)
     maps = ["--map", "time [s]=time:s", "--map", "u1 [V]=input:V:u1"]

@@ -65,6 +65,12 @@ def test_control_point_to_point(capsys):
         (["--kp", "150", "--side", "0.5"], "leaves the workspace"),
         (["--kp", "150", "--motor2-gain-scale", "0"], "--motor2-gain-scale must be > 0"),
         (["--kp", "150", "--variant", "hframe-20"], "'hframe-20' is needed"),
+        # an option of the other trajectory was ignored without a word
+        (["--kp", "150", "--dwell", "1"], "--points and --dwell are for --trajectory points"),
+        (
+            ["--kp", "150", "--trajectory", "points", "--points", "0,0;0.01,0", "--side", "0.1"],
+            "--side is for --trajectory square",
+        ),
     ],
 )
 def test_control_bad_input_writes_nothing(tmp_path, capsys, extra, message):
