@@ -227,11 +227,11 @@ def simulate_closed_loop(
     if p.shape != (len(model.parameters),):
         raise OptionError(f"p needs {len(model.parameters)} values, got shape {p.shape}")
     dt = controller.sample_period_s
-    n = n_substeps or default_substeps(model, p, dt, friction)
     time_s = trajectory.sample_times(dt)
     n_samples = time_s.size - 1
-    if n_samples < 1:
+    if n_samples < 1:  # before the substeps: a period of 1e308 s overflowed their count
         raise OptionError(f"trajectory of {trajectory.end_time_s} s is shorter than one sample")
+    n = n_substeps or default_substeps(model, p, dt, friction)
     r_m = float(p[model.index("parameter", "r")])
     reference_xy = trajectory.position(time_s)
     reference_phi = motor_angles(reference_xy, r_m)

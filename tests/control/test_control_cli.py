@@ -62,6 +62,8 @@ def test_control_point_to_point(capsys):
         (["--kp", "-150"], "--kp must be >= 0, got '-150'"),
         (["--kp", "150", "--kd", "-4"], "--kd must be >= 0"),
         (["--kp", "150", "--sample-time", "-0.001"], "--sample-time must be > 0"),
+        # an OverflowError traceback counting the RK4 substeps of a 1e308 s sample
+        (["--kp", "150", "--sample-time", "1e308"], "is shorter than one sample"),
         (["--kp", "150", "--side", "0.5"], "leaves the workspace"),
         (["--kp", "150", "--motor2-gain-scale", "0"], "--motor2-gain-scale must be > 0"),
         (["--kp", "150", "--variant", "hframe-20"], "'hframe-20' is needed"),
