@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 from hframe_id.errors import ParameterFileError
 
@@ -60,18 +59,13 @@ def format_text(report: dict) -> str:
     return "\n".join(lines)
 
 
-def _most_extreme(values: dict[str, float]) -> str:
-    """``name = value`` of the value farthest from 1 in orders of magnitude."""
-    name = max((n for n in values if values[n]), key=lambda n: abs(math.log10(abs(values[n]))))
-    return f"{name} = {values[name]:g}"
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``hframe-id linearize``: the pole-zero report as text or JSON."""
     import numpy as np
 
     from hframe_id.analysis.export import pole_zero_report
     from hframe_id.parameters import load_parameter_file
+    from hframe_id.parameters.files import most_extreme
 
     params = load_parameter_file(args.file)
     try:
@@ -83,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     except np.linalg.LinAlgError as err:
         raise ParameterFileError(
             f"{args.file}: no poles and zeros for these values ({err}); the most extreme is "
-            f"{_most_extreme(params.values)}"
+            f"{most_extreme(params.values)}"
         ) from None
     if args.json:
         from hframe_id.cli import json_output

@@ -14,10 +14,7 @@ import math
 from collections.abc import Callable
 
 from hframe_id.errors import OptionError, shown
-
-#: Most RK4 substeps per sample an option may ask for: the automatic choice is 4-30 at 1 ms
-#: and 600 for the realistic plant at 10 ms; 10^8 made a 50-sample run take minutes.
-MAX_SUBSTEPS = 10_000
+from hframe_id.simulation import MAX_SUBSTEPS
 
 
 def checked(

@@ -105,6 +105,13 @@ def check_header(doc: Any, required: tuple[str, ...], optional: tuple[str, ...],
             raise ParameterFileError(f"{where}: missing header key {shown(key)}")
 
 
+def most_extreme(values: Mapping[str, float]) -> str:
+    """``name = value`` of the value farthest from 1 in orders of magnitude: what an error
+    about values that cannot be computed with (no poles, no stable step) points at."""
+    name = max((n for n in values if values[n]), key=lambda n: abs(math.log10(abs(values[n]))))
+    return f"{name} = {values[name]:g}"
+
+
 def check_values(variant: str, values: Mapping[str, float], path: Path | None = None) -> None:
     """Validate SI values by parameter name: all required present, none unknown, physical."""
     where = str(path) if path else f"<{variant} parameters>"

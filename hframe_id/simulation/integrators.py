@@ -31,7 +31,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from hframe_id.errors import ModelError
 from hframe_id.models import Model
+from hframe_id.simulation import MAX_SUBSTEPS
 
 #: Real-axis stability limit of classical RK4: |lambda h| <= 2.785.
 RK4_STABILITY_LIMIT = 2.785
@@ -157,6 +159,15 @@ def stable_substeps(
     s = tuple(float(v) for v in (model.options.smoothing if s is None else s))
     p = np.ascontiguousarray(p, dtype=float)
     radius = _cached_radius(model, p.tobytes(), s)
+    if not radius * dt / RK4_STABILITY_LIMIT <= MAX_SUBSTEPS:  # NaN too
+        from hframe_id.parameters.files import most_extreme
+
+        values = dict(zip((spec.name for spec in model.parameters), p.tolist(), strict=True))
+        raise ModelError(
+            f"{model.variant} is too stiff to simulate at these values: its fastest mode at "
+            f"rest ({radius:.3g} 1/s) needs more than {MAX_SUBSTEPS:,} RK4 substeps per "
+            f"sample of {dt:g} s; the most extreme is {most_extreme(values)}"
+        )
     return substeps_for_radius(radius, dt, safety, minimum, cap)
 
 
@@ -181,5 +192,10 @@ def stability_substeps(radius: float, dt: float) -> int:
 
 @lru_cache(maxsize=256)
 def _cached_radius(model: Model, p_bytes: bytes, s: tuple[float, float]) -> float:
-    """``spectral_radius_at_rest`` memoized (simulators ask again for every run)."""
-    return spectral_radius_at_rest(model, np.frombuffer(p_bytes, dtype=float), s)
+    """``spectral_radius_at_rest`` memoized (simulators ask again for every run); infinite
+    where the Jacobian overflows (a pulley radius of 1e300 m), which ``stable_substeps``
+    refuses as too stiff (it was a LinAlgError traceback)."""
+    try:
+        return spectral_radius_at_rest(model, np.frombuffer(p_bytes, dtype=float), s)
+    except np.linalg.LinAlgError:
+        return math.inf

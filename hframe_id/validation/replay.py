@@ -26,7 +26,7 @@ from hframe_id.fitting.rest_state import rest_state
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
 from hframe_id.recordings.recording import Recording
-from hframe_id.simulation.open_loop import outputs_of, simulate
+from hframe_id.simulation.open_loop import default_substeps, outputs_of, simulate
 
 
 def channels(model: Model, recording: Recording) -> Dataset:
@@ -50,6 +50,10 @@ def simulate_channels(
     model = build_model(params.variant)
     p = model.parameter_vector(params.values)
     data = channels(model, recording)
+    # the substeps first: values too stiff to simulate are refused by name there, before
+    # the rest state's least squares fail on them without saying which (an r of 1e300 m)
+    n_substeps = default_substeps(model, p, data.sample_period_s)
     start = rest_state(model, p, data) if x0 is None else x0
-    states = simulate(model, p, data.inputs, data.sample_period_s, x0=start)[:-1]
+    states = simulate(model, p, data.inputs, data.sample_period_s, x0=start, n_substeps=n_substeps)
+    states = states[:-1]
     return data, outputs_of(model, states, data.inputs, p)

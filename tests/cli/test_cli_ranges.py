@@ -126,6 +126,31 @@ def test_fit_channel_with_no_valid_sample(work, capsys):
     assert sorted(p.name for p in work.iterdir()) == ["blind.mcap"]
 
 
+@pytest.mark.parametrize(
+    ("line", "value"),
+    [("J_M1 [kg m^2]: 0.000112", "1.0e-300"), ("r [m]: 0.0194", "1.0e+300")],
+    ids=["inertia-1e-300", "radius-1e300"],
+)
+@pytest.mark.parametrize("command", ["simulate", "record", "control", "validate"])
+def test_a_model_too_stiff_to_simulate(work, capsys, command, line, value):
+    """An inertia of 1e-300 kg m^2 asked for ~1e300 RK4 substeps: the simulation built its
+    expression for ever (gigabytes, deaf to SIGTERM); a radius of 1e300 m was a LinAlgError
+    traceback. Refused before any work, naming the value."""
+    name = line.partition(":")[0]
+    path = work / "extreme.yaml"
+    path.write_text(H8.read_text().replace(line, f"{name}: {value}"))
+    argv = {
+        "simulate": ["simulate", "--params", path, "--step", "1,1", "--duration", "0.1",
+                     "--out", "s.csv"],
+        "record": ["record", "--rig", "sim", "--params", path, "--v1", "1", "--v2", "1",
+                   "--fast", "--out", "r.mcap"],
+        "control": ["control", "--params", path, "--kp", "5", "--csv", "c.csv"],
+        "validate": ["validate", path, REC, "--plot", "plots"],
+    }[command]  # fmt: skip
+    refused([*argv, "--quiet"], capsys, "too stiff to simulate", f"{name.split()[0]} = ")
+    assert sorted(p.name for p in work.iterdir()) == ["extreme.yaml"]
+
+
 @pytest.mark.parametrize("line", ["r [m]: 0.0194", "K_t [N m/A]: 0.023"])
 def test_linearize_extreme_parameter_values(work, capsys, line):
     name = line.partition(":")[0]
