@@ -63,50 +63,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="serial: link fault after this long without a sample [s] (default 0.1)",
     )
     proto = parser.add_argument_group("protocol")
+    step, pulse, sine = _OWN["step"], _OWN["pulse"], _OWN["multisine"]
     proto.add_argument("--protocol", choices=("step", "pulse", "csv", "multisine"), default="step")
     add_number(proto, "--v1", help="step: motor 1 voltage [V]")
     add_number(proto, "--v2", help="step: motor 2 voltage [V] (H-frame)")
-    add_number(
-        proto, "--step", above=0, default=_OWN["step"]["step"], help="step: duration [s] (0.5)"
-    )
+    add_number(proto, "--step", above=0, default=step["step"], help="step: duration [s] (0.5)")
     add_number(proto, "--amplitude", help="pulse: voltage [V]")
-    add_number(
-        proto, "--width", above=0, default=_OWN["pulse"]["width"], help="pulse: duration [s] (0.25)"
-    )
-    add_number(
-        proto, "--motor", int, at_least=1, default=_OWN["pulse"]["motor"], help="pulse: motor (1)"
-    )
+    add_number(proto, "--width", above=0, default=pulse["width"], help="pulse: duration [s] (0.25)")
+    add_number(proto, "--motor", int, at_least=1, default=pulse["motor"], help="pulse: motor (1)")
     proto.add_argument("--csv", type=Path, help="csv: file with 'time [s],u1 [V][,u2 [V]]'")
     add_number(
-        proto,
-        "--rms",
-        above=0,
-        default=_OWN["multisine"]["rms"],
-        help="multisine: RMS per motor [V] (3)",
+        proto, "--rms", above=0, default=sine["rms"], help="multisine: RMS per motor [V] (3)"
     )
     add_number(
         proto,
         "--band",
         above=0,
         nargs=2,
-        default=_OWN["multisine"]["band"],
+        default=sine["band"],
         metavar=("F_MIN", "F_MAX"),
         help="multisine: frequency band [Hz] (0.5 10)",
     )
+    add_number(proto, "--period", above=0, default=sine["period"], help="multisine: period [s] (2)")
+    seed = sine["protocol_seed"]
     add_number(
-        proto,
-        "--period",
-        above=0,
-        default=_OWN["multisine"]["period"],
-        help="multisine: period [s] (2)",
-    )
-    add_number(
-        proto,
-        "--protocol-seed",
-        int,
-        at_least=0,
-        default=_OWN["multisine"]["protocol_seed"],
-        help="multisine: phase seed (0)",
+        proto, "--protocol-seed", int, at_least=0, default=seed, help="multisine: phase seed (0)"
     )
     add_number(
         proto,
