@@ -71,6 +71,9 @@ def decode_rig_samples(
     _check_fields(where, messages, _RIG_SAMPLE_VALIDATOR)
     sequence, device_time_us = _clock(where, messages)
     inputs = np.column_stack([column(where, messages, f"{name}_V", float) for name in input_names])
+    if "dac_min_v" in rig and "dac_max_v" in rig:  # ordered numbers (the reader's checks)
+        for j, name in enumerate(input_names):
+            _check_range(where, sequence, inputs[:, j], f"{name}_V", rig, "dac_min_v", "dac_max_v")
     outputs = np.empty((len(messages), len(output_names)))
     valid = np.ones(outputs.shape, dtype=bool)
     for j, name in enumerate(output_names):
@@ -81,6 +84,13 @@ def decode_rig_samples(
             outputs[:, j], valid[:, j] = _flagged(
                 where, messages, sequence, f"laser_{name}_m", f"laser_{name}_valid"
             )
+            if "laser_min_m" in rig and "laser_max_m" in rig:
+                # a valid reading is the target inside the range, plus the sensor's noise
+                slack = LASER_SLACK_STD * float(rig.get("laser_noise_std_m", 0.0))
+                _check_range(
+                    where, sequence, np.where(valid[:, j], outputs[:, j], rig["laser_min_m"]),
+                    f"laser_{name}_m (valid)", rig, "laser_min_m", "laser_max_m", slack,
+                )  # fmt: skip
     return SampleColumns(
         sequence=sequence,
         device_time_us=device_time_us,
@@ -138,6 +148,34 @@ def _clock(where: str, messages: list[dict[str, Any]]) -> tuple[np.ndarray, np.n
     _check_increasing(where, "sequence", sequence)
     _check_increasing(where, "device_time_us", device_time_us)
     return sequence, device_time_us
+
+
+#: How far past its measuring range a valid laser reading may lie, in the laser's noise std.
+LASER_SLACK_STD = 10.0
+
+
+def _check_range(
+    where: str,
+    sequence: np.ndarray,
+    values: np.ndarray,
+    field: str,
+    rig: dict[str, Any],
+    low_key: str,
+    high_key: str,
+    slack: float = 0.0,
+) -> None:
+    """Every value within [rig[low_key], rig[high_key]] widened by ``slack``: commands are
+    clamped to the DAC range and a valid laser reading is a target inside the range, so a
+    value beyond (a voltage of 1e300 V, a reading of 1e300 m) is a broken file, which fits
+    ran on for seconds, with numpy overflow warnings, to a failure."""
+    low, high = float(rig[low_key]) - slack, float(rig[high_key]) + slack
+    outside = (values < low) | (values > high)
+    if outside.any():
+        i = int(np.argmax(outside))
+        raise LogFormatError(
+            f"{where}: sample {i} (sequence {sequence[i]}): {field} {values[i]:g} is outside "
+            f"rig.{low_key} .. rig.{high_key} [{rig[low_key]:g}, {rig[high_key]:g}]"
+        )
 
 
 def _flagged(

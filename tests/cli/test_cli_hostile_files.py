@@ -264,6 +264,24 @@ def test_rig_metadata_out_of_range(work, capsys, key, value, problem):
     refused(["inspect", path], capsys, path, f"rig.{key}", problem)
 
 
+@pytest.mark.parametrize(
+    ("field", "named"),
+    [
+        ("u1_V", "u1_V 1e+300 is outside rig.dac_min_v .. rig.dac_max_v [-10, 10]"),
+        ("laser_x_m", "laser_x_m (valid) 1e+300 is outside rig.laser_min_m .. rig.laser_max_m"),
+    ],
+)
+@pytest.mark.parametrize("command", ["inspect", "fit"])
+def test_a_sample_beyond_the_rigs_ranges(work, capsys, field, named, command):
+    """A command of 1e300 V (the rig clamps to its DAC range) or a valid laser reading of
+    1e300 m (valid: the target inside the measuring range) was read as data: the fit ran
+    for seconds with numpy overflow warnings to exit status 1."""
+    path = _recording(work / "far.mcap", lambda i, m: {**m, field: 1e300} if i == 7 else m)
+    argv = [command, path] + (["--quiet", "--out-dir", "fits"] if command == "fit" else [])
+    refused(argv, capsys, path, "sample 7", named)
+    assert _listing(work) == {"far.mcap"}
+
+
 def test_a_named_pipe_without_writer_is_not_waited_on(work, capsys):
     """A FIFO given as a parameter file used to block the command forever."""
     os.mkfifo(work / "pipe.yaml")
