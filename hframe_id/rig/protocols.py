@@ -269,6 +269,11 @@ class MultisineProtocol:
                 f"multisine band {self.f_min_hz}-{self.f_max_hz} Hz holds fewer than one "
                 f"{1 / self.period_s:g} Hz component per motor; widen it or lengthen the period"
             )
+        # the peak is at most a_m |I_m| = rms sqrt(2 |I_m|): beyond any float, the table's
+        # sums overflowed to inf (numpy warnings, then inf volts clamped without a word)
+        peak = abs(self.rms_v) * math.sqrt(2.0 * len(self._components()))
+        if not math.isfinite(peak):
+            raise OptionError(f"multisine rms {self.rms_v:g} V: its peak overflows a float")
         StepProtocol((self.rms_v,), 0.0, self.duration_s, self.pre_roll_s)
 
     def _components(self) -> np.ndarray:

@@ -31,6 +31,7 @@ def work(tmp_path, monkeypatch) -> Path:
         (["--protocol", "pulse", "--amplitude", "1", "--width", "0"], "--width", "0"),
         (["--protocol", "multisine", "--rms", "-1"], "--rms", "-1"),
         (["--protocol", "multisine", "--rms", "nan"], "--rms", "nan"),
+        (["--protocol", "multisine", "--rms", "1e308"], "multisine rms", "overflows"),
         (["--protocol", "multisine", "--band", "0.5", "5000"], "--band", "Nyquist frequency 500"),
         (["--protocol", "multisine", "--duration", "0.1"], "--duration", "one --period 2 s"),
         (
