@@ -195,6 +195,15 @@ def load_json(data: bytes | str, where: str, error: type[HframeIdError]) -> Any:
         raise error(f"{where}: not JSON ({err})") from None
 
 
+def not_a_file(path: Path) -> str:
+    """What ``path``, which is not a regular file, is instead (for the error line)."""
+    if path.is_dir():
+        return "is a directory, not a file"
+    if path.exists():
+        return "is a device, pipe or socket, not a file"
+    return "no such file"
+
+
 def open_input(path: Path) -> BinaryIO:
     """``path`` opened for reading in binary. A named pipe that no program writes to reads
     as empty instead of waiting forever (opened without blocking, then read blocking); a

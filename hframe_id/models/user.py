@@ -36,6 +36,7 @@ from typing import Any, TypeVar
 
 import casadi as ca
 
+from hframe_id.documents import not_a_file
 from hframe_id.errors import Interrupted, ModelError, shown
 from hframe_id.models.declaration import ModelDeclaration, Output
 from hframe_id.models.lagrange import Friction, LagrangianSystem
@@ -393,8 +394,8 @@ def threads_left_running() -> list[tuple[str, threading.Thread]]:
 
 def _checked_source(path: str | Path, kind: str, error: type[ModelError]) -> Path:
     path = Path(path).resolve()
-    if not path.is_file():
-        raise error(f"{kind} {path} does not exist")
+    if not path.is_file():  # a folder or a pipe "did not exist"
+        raise error(f"{kind} {path}: {not_a_file(path)}")
     if path.suffix != ".py":
         raise error(f"{kind} {path}: expected a Python file (.py), got {path.suffix!r}")
     return path

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from hframe_id.digests import sha256_file
+from hframe_id.documents import not_a_file
 from hframe_id.errors import HframeIdError
 from hframe_id.recordings.matrix_columns import MatrixColumn, parse_matrix_column
 
@@ -148,7 +149,7 @@ def read_source(path: str | os.PathLike) -> SourceTable:
     """Read a CSV (``.csv``, ``.tsv``, ``.txt``) or MATLAB (``.mat``) file."""
     path = Path(path)
     if not path.is_file():
-        raise SourceDataError(f"{path}: {_not_a_file(path)}")
+        raise SourceDataError(f"{path}: {not_a_file(path)}")
     suffix = path.suffix.lower()
     if suffix in CSV_SUFFIXES:
         return _read_csv(path)
@@ -158,15 +159,6 @@ def read_source(path: str | os.PathLike) -> SourceTable:
         f"{path}: unknown file type {path.suffix!r}; import reads CSV "
         f"({', '.join(CSV_SUFFIXES)}) and MATLAB ({', '.join(MAT_SUFFIXES)}) files"
     )
-
-
-def _not_a_file(path: Path) -> str:
-    """What ``path``, which is not a regular file, is instead (for the error line)."""
-    if path.is_dir():
-        return "is a directory, not a file"
-    if path.exists():
-        return "is a device, pipe or socket, not a file"
-    return "no such file"
 
 
 def _read_csv(path: Path) -> SourceTable:

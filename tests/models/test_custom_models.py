@@ -232,7 +232,14 @@ def test_bad_model_files_fail_with_one_line(tmp_path, capsys, text, message):
 
 def test_a_missing_model_file_is_one_line(capsys):
     assert main(["models", "--model-file", "no/such/model.py"]) == 2
-    assert "does not exist" in capsys.readouterr().err
+    assert "model.py: no such file" in capsys.readouterr().err
+
+
+def test_a_folder_as_model_file_is_named_as_one(tmp_path, capsys):
+    """A folder (or a pipe) given as a model file was said not to exist."""
+    (tmp_path / "dir.py").mkdir()
+    assert main(["models", "--model-file", str(tmp_path / "dir.py")]) == 2
+    assert "dir.py: is a directory, not a file" in capsys.readouterr().err
 
 
 def test_a_package_registers_models_through_the_entry_point_group(monkeypatch, tmp_path):
