@@ -211,3 +211,58 @@ def test_a_better_larger_fit_with_its_limit_undetermined_is_a_start_for_the_smal
     else:
         assert kept.parameters is first.parameters and math.isnan(choice.continued)
         assert "I_max poorly determined" in kept.message
+
+
+@pytest.mark.parametrize(("second_criterion", "refitted"), [(-1500.0, True), (-800.0, False)])
+def test_a_larger_fit_that_ends_worse_than_the_smaller_is_fitted_again_from_its_end(
+    monkeypatch, small_result, second_criterion, refitted
+):
+    """The limited fit from step 1's start ends worse (-900) than the hframe-8 fit (-1000),
+    whose end is a point of the limited model: it is fitted again from that end with I_max
+    at the limited model's reference value, and that fit goes on to the choice where it is
+    the better of the two (-1500: kept, saying so); where it is not (-800), the first stands
+    and hframe-8 is kept."""
+    from hframe_id.fitting import structure_choice
+    from hframe_id.fitting.noise_rounds import NoiseReport
+    from hframe_id.fitting.result import ParameterEstimate
+
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
+    first = small_result().with_diagnostics(noise=NoiseReport(rounds=2, channels={}))
+    i_max = ParameterEstimate("I_max", "A", 8.0, 7.0, 0.07, (6.86, 7.14), True, True, 0.01)
+    estimates = {**first.estimates, "I_max": i_max}
+    worse = small_result(parameters=limited.replace_values(k_l=9000.0), estimates=estimates)
+    second = small_result(parameters=limited.replace_values(k_l=12500.0), estimates=estimates)
+    criteria = {
+        id(first.parameters): -1000.0,
+        id(worse.parameters): -900.0,
+        id(second.parameters): second_criterion,
+    }
+    monkeypatch.setattr(
+        structure_choice.Criterion, "of", lambda *a, **k: lambda p, *a, **k: criteria[id(p)]
+    )
+    monkeypatch.setattr(structure_choice, "replayed_starts", lambda result: None)
+    monkeypatch.setattr(structure_choice, "_larger_start", lambda *a: limited)
+    starts = []
+
+    def fit(recordings, start, options):
+        starts.append(start)
+        assert options.structure == "as-given" and "I_max" in options.free
+        return worse if start is limited else second
+
+    options = FitOptions().for_model("hframe-8")
+    kept = with_structure_choice([], table, options, first, fit=fit)
+    from_end = starts[1]
+    assert starts[0] is limited and from_end.variant == LARGER
+    assert from_end.values["k_l"] == first.parameters.values["k_l"]  # the smaller fit's end
+    assert from_end.values["I_max"] == limited.values["I_max"]  # the reference value
+    choice = kept.diagnostics.structure
+    if refitted:
+        assert choice.chosen == LARGER and kept.parameters is second.parameters
+        assert choice.start is from_end and choice.first_larger == -900.0
+        assert choice.criteria[LARGER] == -1500.0
+        assert "where the first hframe-8-current-limit fit ended worse (-900)" in kept.message
+    else:
+        assert choice.chosen == "hframe-8" and kept.parameters is first.parameters
+        assert choice.start is limited and math.isnan(choice.first_larger)
+        assert choice.criteria[LARGER] == -900.0
