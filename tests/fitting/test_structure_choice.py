@@ -37,6 +37,18 @@ def _choice(**changes):
     return dataclasses.replace(choice, **changes)
 
 
+def _judged_by(monkeypatch, criteria: dict, larger_start) -> None:
+    """Every file's criterion looked up by its parameter set's id in ``criteria``, and
+    ``larger_start`` as step 1's start of the larger fit (no simulation)."""
+    from hframe_id.fitting import structure_choice
+
+    monkeypatch.setattr(
+        structure_choice.Criterion, "of", lambda *a, **k: lambda p, *a, **k: criteria[id(p)]
+    )
+    monkeypatch.setattr(structure_choice, "replayed_starts", lambda result: None)
+    monkeypatch.setattr(structure_choice, "_larger_start", lambda *a: larger_start)
+
+
 def test_hframe8_nests_in_the_current_limited_variant():
     """The larger model is hframe-8 with one parameter more, I_max [A], held by default (a
     data-sheet value) and built in."""
@@ -171,7 +183,6 @@ def test_a_better_larger_fit_with_its_limit_undetermined_is_a_start_for_the_smal
     identified: hframe-8 is fitted again from its end (I_max dropped) and kept where that
     fit is better than the first by more than the likelihood ratio (-1200), reported from the
     user's start; not where it is within it (-1001)."""
-    from hframe_id.fitting import structure_choice
     from hframe_id.fitting.noise_rounds import NoiseReport
     from hframe_id.fitting.result import ParameterEstimate
 
@@ -186,11 +197,7 @@ def test_a_better_larger_fit_with_its_limit_undetermined_is_a_start_for_the_smal
     again = small_result(parameters=table.replace_values(k_l=11500.0))
     criteria = {id(first.parameters): -1000.0, id(larger.parameters): -1500.0}
     criteria[id(again.parameters)] = again_criterion
-    monkeypatch.setattr(
-        structure_choice.Criterion, "of", lambda *a, **k: lambda p, *a, **k: criteria[id(p)]
-    )
-    monkeypatch.setattr(structure_choice, "replayed_starts", lambda result: None)
-    monkeypatch.setattr(structure_choice, "_larger_start", lambda *a: limited)
+    _judged_by(monkeypatch, criteria, limited)
     starts = []
 
     def fit(recordings, start, options):
@@ -222,7 +229,6 @@ def test_a_larger_fit_that_ends_worse_than_the_smaller_is_fitted_again_from_its_
     at the limited model's reference value, and that fit goes on to the choice where it is
     the better of the two (-1500: kept, saying so); where it is not (-800), the first stands
     and hframe-8 is kept."""
-    from hframe_id.fitting import structure_choice
     from hframe_id.fitting.noise_rounds import NoiseReport
     from hframe_id.fitting.result import ParameterEstimate
 
@@ -238,11 +244,7 @@ def test_a_larger_fit_that_ends_worse_than_the_smaller_is_fitted_again_from_its_
         id(worse.parameters): -900.0,
         id(second.parameters): second_criterion,
     }
-    monkeypatch.setattr(
-        structure_choice.Criterion, "of", lambda *a, **k: lambda p, *a, **k: criteria[id(p)]
-    )
-    monkeypatch.setattr(structure_choice, "replayed_starts", lambda result: None)
-    monkeypatch.setattr(structure_choice, "_larger_start", lambda *a: limited)
+    _judged_by(monkeypatch, criteria, limited)
     starts = []
 
     def fit(recordings, start, options):
