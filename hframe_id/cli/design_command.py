@@ -155,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
     from hframe_id.design.optimise import TRAVEL_MARGIN_M, DesignOptions, Limits
     from hframe_id.parameters import load_parameter_file
     from hframe_id.recordings.sensors import SensorModel
+    from hframe_id.simulation.integrators import check_simulable
 
     options = DesignOptions(
         criterion=Criterion(args.criterion, _names(args.focus, "--focus")),
@@ -171,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
     check_length(args.duration, options.sample_period_s, "--duration")
     params = load_parameter_file(args.params)
     _check_model(params, args.params)
+    check_simulable(params, options.sample_period_s, f"--params {args.params}")
     return _design(args, params, limits, options, calibration, (out, report_path, plot_path))
 
 

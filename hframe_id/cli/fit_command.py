@@ -213,6 +213,7 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
     """The recordings (``paths``, ``recordings``), the start (``initial``, ``initial_path``),
     the fitted ``variant`` and the options with the model's defaults, read and checked."""
     from hframe_id.recordings import read_recording
+    from hframe_id.simulation.integrators import check_simulable
 
     model = args.model or (args.loaded_models[0] if len(args.loaded_models) == 1 else None)
     if model:
@@ -231,10 +232,14 @@ def _inputs(args: argparse.Namespace, options: FitOptions):
     if not model:
         initial, initial_path = _initial(args, variant)
     options = options.for_model(variant)
+    start_source = f"--initial {initial_path}" if args.initial else str(initial_path)
+    check_simulable(initial, recordings[0].sample_period_s, start_source)
     if args.known:
         from hframe_id.parameters import load_parameter_file
 
         known = tuple(load_parameter_file(Path(p), variant=variant) for p in args.known)
+        for path, point in zip(args.known, known, strict=True):
+            check_simulable(point, recordings[0].sample_period_s, f"--known {path}")
         options = dataclasses.replace(options, known_points=known)
     return paths, recordings, initial, initial_path, variant, options
 

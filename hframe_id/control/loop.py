@@ -222,6 +222,23 @@ def _diverged(model: Model, recording: Recording, time_s: np.ndarray, states: np
     return float(time_s[hits[0]]) if hits.size else None
 
 
+def _check_commands(
+    controller: ControllerDeclaration, time_s: np.ndarray, states: np.ndarray, commands
+) -> None:
+    """Raise ``ControllerError`` at the first t_k where the law computed a command that is
+    not a number or infinite from a finite plant state: the law's fault, not the plant's
+    (the saturation turned a NaN into its lower limit, and the run went on as data)."""
+    commands = np.asarray(commands, dtype=float)
+    bad = np.flatnonzero(~np.isfinite(commands).all(axis=1) & np.isfinite(states).all(axis=1))
+    if bad.size:
+        k = int(bad[0])
+        j = int(np.flatnonzero(~np.isfinite(commands[k]))[0])
+        raise ControllerError(
+            f"{controller.where}: the law computed {controller.command_names[j]} = "
+            f"{commands[k, j]:g} at t = {time_s[k] - time_s[0]:g} s, from a finite plant state"
+        )
+
+
 def simulate_loop(
     model: Model,
     p: np.ndarray,
@@ -275,6 +292,7 @@ def simulate_loop(
         ],
     )
     states = np.vstack([z0, z[:-1]])[:, : model.n_states]
+    _check_commands(controller, time_s, states, c)
     return LoopResult(
         time_s=time_s,
         states=states,

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from hframe_id.errors import ModelError
-from hframe_id.models import Model
+from hframe_id.models import Model, build_model
 from hframe_id.simulation import MAX_SUBSTEPS
 
 #: Real-axis stability limit of classical RK4: |lambda h| <= 2.785.
@@ -169,6 +169,20 @@ def stable_substeps(
             f"sample of {dt:g} s; the most extreme is {most_extreme(values)}"
         )
     return substeps_for_radius(radius, dt, safety, minimum, cap)
+
+
+def check_simulable(params, sample_period_s: float, source: str) -> None:
+    """Refuse a parameter file (``params``, a ``ParameterSet`` read from ``source``) whose
+    values are too stiff to simulate at ``sample_period_s`` [s] (``stable_substeps``): one
+    ``ModelError`` naming the source and the most extreme value. The commands that start
+    from a file rather than simulate it first (a fit's start and known points, a design's
+    nominal values) check it before any work: they were least-squares or eigenvalue
+    tracebacks deep in the fitter (a pulley radius of 1e300 m), or a misleading refusal."""
+    model = build_model(params.variant)
+    try:
+        stable_substeps(model, model.parameter_vector(params.values), sample_period_s)
+    except ModelError as err:
+        raise ModelError(f"{source}: {err}") from None
 
 
 def substeps_for_radius(

@@ -132,11 +132,14 @@ def test_fit_channel_with_no_valid_sample(work, capsys):
     [("J_M1 [kg m^2]: 0.000112", "1.0e-300"), ("r [m]: 0.0194", "1.0e+300")],
     ids=["inertia-1e-300", "radius-1e300"],
 )
-@pytest.mark.parametrize("command", ["simulate", "record", "control", "validate"])
+@pytest.mark.parametrize(
+    "command", ["simulate", "record", "control", "validate", "fit", "fit-known", "design"]
+)
 def test_a_model_too_stiff_to_simulate(work, capsys, command, line, value):
     """An inertia of 1e-300 kg m^2 asked for ~1e300 RK4 substeps: the simulation built its
     expression for ever (gigabytes, deaf to SIGTERM); a radius of 1e300 m was a LinAlgError
-    traceback. Refused before any work, naming the value."""
+    traceback (in a fit's start screen and a design's simulation too; a design with the
+    inertia was refused for "no valid sample"). Refused before any work, naming the value."""
     name = line.partition(":")[0]
     path = work / "extreme.yaml"
     path.write_text(H8.read_text().replace(line, f"{name}: {value}"))
@@ -147,6 +150,10 @@ def test_a_model_too_stiff_to_simulate(work, capsys, command, line, value):
                    "--fast", "--out", "r.mcap"],
         "control": ["control", "--params", path, "--kp", "5", "--csv", "c.csv"],
         "validate": ["validate", path, REC, "--plot", "plots"],
+        "fit": ["fit", REC, "--initial", path, "--out-dir", "fits"],
+        "fit-known": ["fit", REC, "--known", path, "--out-dir", "fits"],
+        "design": ["design", "--params", path, "--duration", "1", "--max-voltage", "6",
+                   "--travel", "x=-0.2:0.2", "--travel", "y=-0.2:0.2", "--out", "d.csv"],
     }[command]  # fmt: skip
     refused([*argv, "--quiet"], capsys, "too stiff to simulate", f"{name.split()[0]} = ")
     assert sorted(p.name for p in work.iterdir()) == ["extreme.yaml"]

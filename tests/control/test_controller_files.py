@@ -108,6 +108,22 @@ def test_an_unstable_loop_is_a_result_in_validate_and_an_error_in_control(tmp_pa
     assert "unstable closed loop" in _error_line(capsys)
 
 
+@pytest.mark.parametrize("command", ["validate", "control"])
+def test_a_law_computing_nan_is_one_line(tmp_path, capsys, command):
+    """A law that computes NaN from finite measurements: the saturation made it -10 V and the
+    run went on as data (exit 0, a CSV of blank commands). The law's fault, named."""
+    path = tmp_path / "nan.py"
+    path.write_text(GOOD.replace('g["kp"] * (', 'float("nan") * g["kp"] * ('))
+    argv = {
+        "validate": ["validate", IDIM, EMPS, "--controller", str(path)],
+        "control": ["control", "--params", IDIM, "--controller", str(path), "--reference",
+                    EMPS, "--csv", str(tmp_path / "run.csv")],
+    }[command]  # fmt: skip
+    assert main([*argv, "--model-file", AXIS, "--quiet"]) == 2
+    assert "the law computed vir = nan at t = 0 s" in _error_line(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.py"]
+
+
 def test_control_runs_a_declared_model_under_a_declared_controller(tmp_path, capsys):
     csv = tmp_path / "run.csv"
     controller = str(models_dir() / "emps_controller.py")
