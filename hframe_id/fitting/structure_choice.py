@@ -92,6 +92,8 @@ class StructureChoice:
     first_larger : the criterion of the larger fit from step 1's start where it ended worse
         than the smaller fit and its fit from the smaller fit's end did better (the module's
         doc); ``start`` is then that second fit's start. Else NaN.
+    second_larger : the criterion of that second larger fit where it ran and did not do
+        better than the first (infinite where it raised); else NaN.
     """
 
     asked: str
@@ -107,6 +109,7 @@ class StructureChoice:
     failure: str = ""
     continued: float = math.nan
     first_larger: float = math.nan
+    second_larger: float = math.nan
 
     @property
     def tried(self) -> bool:
@@ -136,6 +139,11 @@ class StructureChoice:
             numbers += (
                 f"; fitted from the {self.asked} fit's end, where the first {self.larger} "
                 f"fit ended worse ({self.first_larger:.6g})"
+            )
+        if not math.isnan(self.second_larger):
+            numbers += (
+                f"; fitted again from the {self.asked} fit's end, no better "
+                f"({self.second_larger:.6g})"
             )
         if self.chosen == self.larger:
             return f"{self.larger} kept: {numbers}"
@@ -251,7 +259,7 @@ def with_structure_choice(
         choice = StructureChoice(asked, larger, extra, unit, start, criteria, chosen=asked)
         return _chosen(result, replace(choice, failure=failed))
     criteria[larger] = criterion(other.parameters, (replayed_starts(other),))
-    first_larger = math.nan
+    first_larger = second_larger = math.nan
     if criteria[larger] > criteria[asked] + LIKELIHOOD_RATIO_95:
         again = _larger_from_smaller(recordings, result, larger, extra, options, fit)
         second = (
@@ -262,6 +270,8 @@ def with_structure_choice(
         if second < criteria[larger]:
             first_larger = criteria[larger]
             (start, other), criteria[larger] = again, second
+        else:
+            second_larger = second
     estimate = other.estimates[extra]
     keep = (
         other.success
@@ -280,6 +290,7 @@ def with_structure_choice(
         larger_success=other.success,
         chosen=larger if keep else asked,
         first_larger=first_larger,
+        second_larger=second_larger,
     )
     better = criteria[larger] < criteria[asked] - LIKELIHOOD_RATIO_95
     if keep or not (other.success and better):

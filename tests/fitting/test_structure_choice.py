@@ -227,8 +227,8 @@ def test_a_larger_fit_that_ends_worse_than_the_smaller_is_fitted_again_from_its_
     """The limited fit from step 1's start ends worse (-900) than the hframe-8 fit (-1000),
     whose end is a point of the limited model: it is fitted again from that end with I_max
     at the limited model's reference value, and that fit goes on to the choice where it is
-    the better of the two (-1500: kept, saying so); where it is not (-800), the first stands
-    and hframe-8 is kept."""
+    the better of the two (-1500: kept, saying so); where it is not (-800), the first stands,
+    hframe-8 is kept, and the statement says the second fit ran."""
     from hframe_id.fitting.noise_rounds import NoiseReport
     from hframe_id.fitting.result import ParameterEstimate
 
@@ -262,9 +262,11 @@ def test_a_larger_fit_that_ends_worse_than_the_smaller_is_fitted_again_from_its_
     if refitted:
         assert choice.chosen == LARGER and kept.parameters is second.parameters
         assert choice.start is from_end and choice.first_larger == -900.0
+        assert math.isnan(choice.second_larger)
         assert choice.criteria[LARGER] == -1500.0
         assert "where the first hframe-8-current-limit fit ended worse (-900)" in kept.message
     else:
         assert choice.chosen == "hframe-8" and kept.parameters is first.parameters
         assert choice.start is limited and math.isnan(choice.first_larger)
-        assert choice.criteria[LARGER] == -900.0
+        assert choice.second_larger == -800.0 and choice.criteria[LARGER] == -900.0
+        assert "fitted again from the hframe-8 fit's end, no better (-800)" in kept.message
