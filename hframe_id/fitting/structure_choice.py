@@ -141,10 +141,12 @@ class StructureChoice:
                 f"fit ended worse ({self.first_larger:.6g})"
             )
         if not math.isnan(self.second_larger):
-            numbers += (
-                f"; fitted again from the {self.asked} fit's end, no better "
-                f"({self.second_larger:.6g})"
+            outcome = (
+                "which raised"
+                if math.isinf(self.second_larger)
+                else f"no better ({self.second_larger:.6g})"
             )
+            numbers += f"; fitted again from the {self.asked} fit's end, {outcome}"
         if self.chosen == self.larger:
             return f"{self.larger} kept: {numbers}"
         if not math.isnan(self.continued):

@@ -81,6 +81,11 @@ def test_hframe8_nests_in_the_current_limited_variant():
             "sensors' noise",
         ),
         ({"start": None, "chosen": "hframe-8"}, "hframe-8-current-limit not tried", "x/÷2"),
+        (
+            {"chosen": "hframe-8", "second_larger": math.inf},
+            "hframe-8 kept",
+            "fitted again from the hframe-8 fit's end, which raised",
+        ),
     ],
 )
 def test_the_statement_says_what_decided(changes, begins, says):
