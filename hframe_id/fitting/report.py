@@ -56,6 +56,7 @@ from hframe_id.parameters.reduce import reduce_to_hframe8
 from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import default_substeps, outputs_of, simulate
 from hframe_id.validation.cross_validation import LeaveOneOutTable
+from hframe_id.validation.replay import channels
 
 
 @dataclass(frozen=True)
@@ -309,26 +310,32 @@ def _signal_lines(
     label: str,
     figures: Figures | None,
 ) -> list[str]:
-    """Per experiment: rms residuals and a figure (None: no figures)."""
+    """Per experiment: rms residuals and a figure (None: no figures). A channel with a
+    sensor latency of d samples is shown as the fit compared it: advanced by d samples
+    (``validation.replay.channels``), so that these are the residuals ``validate`` shows."""
     units = output_units(result.variant)
+    model = build_model(result.variant)
+    latency = result.options.latency_samples
     lines = ["## Measured and simulated signals", ""]
     x0s = result.initial_states
     for i, rec in enumerate(recordings):
         x0 = x0s[i] if x0s is not None else None
         fitted, reference = simulated_outputs([result.parameters, thesis], rec, x0)
+        data = channels(model, rec, latency)
         rms = []
-        for j, name in enumerate(rec.output_names):
-            valid = rec.valid[:, j]
+        for j, name in enumerate(data.names):
+            valid = data.valid[:, j]
             scale, unit = shown_in(units[name])
-            value = np.sqrt(np.mean((rec.outputs[valid, j] - fitted[valid, j]) ** 2))
-            rms.append(f"{name} {scale * value:.3g} {unit}")
+            value = np.sqrt(np.mean((data.measured[valid, j] - fitted[valid, j]) ** 2))
+            delay = f" (sensor {latency[name]} samples late)" if latency.get(name) else ""
+            rms.append(f"{name} {scale * value:.3g} {unit}{delay}")
         lines += [f"### {rec.name()}", "", f"RMS residual: {', '.join(rms)}", ""]
         if figures is not None:
             signals = ExperimentSignals(
                 time_s=rec.time_s,
-                names=tuple(rec.output_names),
-                units=tuple(units[name] for name in rec.output_names),
-                measured=np.where(rec.valid, rec.outputs, np.nan),
+                names=data.names,
+                units=tuple(units[name] for name in data.names),
+                measured=data.measured,
                 fitted=fitted,
                 reference=reference,
                 title=rec.name(),

@@ -25,7 +25,7 @@ from hframe_id.validation.inverse_model import InverseModelScore, inverse_model_
 from hframe_id.validation.metrics import fit_percent
 from hframe_id.validation.open_loop_rmse import DEFAULT_INIT_SAMPLES, open_loop_rmse
 from hframe_id.validation.prediction import DEFAULT_HORIZON, DEFAULT_WINDOW, predict_ahead
-from hframe_id.validation.replay import simulate_channels
+from hframe_id.validation.replay import sensor_latency, simulate_channels
 from hframe_id.validation.residuals import (
     DEFAULT_MAX_LAG,
     CorrelationTest,
@@ -148,12 +148,15 @@ class RecordingResult:
 
 @dataclass(frozen=True)
 class ValidationResult:
-    """``validate``'s result: options, the labelled parameter sets, one entry per recording."""
+    """``validate``'s result: options, the labelled parameter sets, one entry per recording,
+    and per set the sensors' latencies [samples] its channels were compared with
+    (``replay.sensor_latency``)."""
 
     options: ValidationOptions
     labels: tuple[str, ...]
     parameter_sets: tuple[ParameterSet, ...]
     recordings: tuple[RecordingResult, ...]
+    latencies: tuple[dict[str, int], ...]
 
 
 def label_of(params: ParameterSet) -> str:
@@ -191,10 +194,15 @@ def _channel(run_data: Dataset, j: int, simulated, predicted, options) -> Channe
 
 
 def validate_one(
-    params: ParameterSet, recording: Recording, options: ValidationOptions, label: str
+    params: ParameterSet,
+    recording: Recording,
+    options: ValidationOptions,
+    label: str,
+    latency: dict[str, int] | None = None,
 ) -> RunResult:
-    """One parameter set on one recording (checked beforehand by ``checks.check_inputs``)."""
-    data, simulated = simulate_channels(params, recording)
+    """One parameter set on one recording (checked beforehand by ``checks.check_inputs``),
+    its channels advanced by the sensors' ``latency`` [samples] (``replay.channels``)."""
+    data, simulated = simulate_channels(params, recording, latency=latency)
     if options.horizon:
         predicted = predict_ahead(params, data, options.horizon, options.window)
     else:
@@ -213,7 +221,7 @@ def validate_one(
         simulated,
         predicted,
         channels,
-        open_loop_rmse(params, recording, options.init_samples),
+        open_loop_rmse(params, recording, options.init_samples, latency),
         inverse_model_score(params, data, friction),
         closed_loop,
     )
@@ -233,10 +241,15 @@ def validate(
     recordings : held-out recordings of one rig.
     options : horizon, window, lags (default ``ValidationOptions()``).
 
+    A fit's file is replayed with the sensors' latencies it was fitted with
+    (``replay.sensor_latency``), as the fit scored it.
+
     Raises
     ------
     OptionError : before any simulation, if a set's model cannot produce a recording's
         channels from its inputs, or the recordings come from different rigs.
+    ParameterFileError : before any simulation, a file's latencies that are not whole
+        samples in 0..100.
     ControllerError : before any simulation, if the controller does not drive a set's model
         or reads a signal a recording lacks.
     """
@@ -245,6 +258,7 @@ def validate(
     if not parameter_sets:
         raise OptionError("no parameter sets to validate")
     check_inputs(parameter_sets, recordings)
+    latencies = tuple(sensor_latency(params) for params in parameter_sets)
     if options.controller is not None:
         for params in parameter_sets:
             model = build_model(params.variant)
@@ -256,10 +270,10 @@ def validate(
         RecordingResult(
             rec,
             tuple(
-                validate_one(params, rec, options, label)
-                for params, label in zip(parameter_sets, labels, strict=True)
+                validate_one(params, rec, options, label, latency)
+                for params, label, latency in zip(parameter_sets, labels, latencies, strict=True)
             ),
         )
         for rec in recordings
     )
-    return ValidationResult(options, labels, parameter_sets, results)
+    return ValidationResult(options, labels, parameter_sets, results, latencies)

@@ -154,7 +154,8 @@ def leave_one_out(
         if progress is not None:
             progress(i + 1, len(recordings), held.name())
         result = fit_recordings(recordings[:i] + recordings[i + 1 :], initial, options)
-        data, simulated = simulate_channels(result.parameters, held)
+        latency = result.options.latency_samples
+        data, simulated = simulate_channels(result.parameters, held, latency=latency)
         folds.append(
             Fold(
                 held_out=held.name(),

@@ -17,6 +17,8 @@ in the output's unit, not a fit % that rounds to 100.00 for every good model.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from hframe_id.parameters import ParameterSet
@@ -29,15 +31,20 @@ DEFAULT_INIT_SAMPLES = 20
 
 
 def open_loop_rmse(
-    params: ParameterSet, recording: Recording, init_samples: int = DEFAULT_INIT_SAMPLES
+    params: ParameterSet,
+    recording: Recording,
+    init_samples: int = DEFAULT_INIT_SAMPLES,
+    latency: Mapping[str, int] | None = None,
 ) -> dict[str, float]:
-    """RMSE of each output channel after ``init_samples`` [the channel's SI unit]; NaN for a
+    """RMSE of each output channel after ``init_samples`` [the channel's SI unit], the
+    channels advanced by the sensors' ``latency`` [samples] (``replay.channels``); NaN for a
     channel without a valid sample after them."""
     from hframe_id.models import build_model
 
-    data = channels(build_model(params.variant), recording)
+    data = channels(build_model(params.variant), recording, latency)
     window = min(init_samples, data.measured.shape[0] - 1)
-    _, simulated = simulate_channels(params, recording, initial_state(params, data, window))
+    x0 = initial_state(params, data, window)
+    _, simulated = simulate_channels(params, recording, x0, latency)
     rmse = {}
     for j, name in enumerate(data.names):
         valid = data.valid[init_samples:, j]

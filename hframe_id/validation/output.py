@@ -109,8 +109,11 @@ def to_document(result: ValidationResult) -> dict[str, Any]:
                 "path": str(params.path) if params.path else None,
                 "model": params.variant,
                 "title": params.title,
+                "latency_samples": latency,
             }
-            for label, params in zip(result.labels, result.parameter_sets, strict=True)
+            for label, params, latency in zip(
+                result.labels, result.parameter_sets, result.latencies, strict=True
+            )
         ],
         "recordings": [
             {
@@ -220,6 +223,13 @@ def to_text(result: ValidationResult) -> str:
                 )
         lines += _scores_text(entry, result.labels, result.options)
         lines.append("")
+    for label, latency in zip(result.labels, result.latencies, strict=True):
+        delays = ", ".join(f"{name} {d}" for name, d in latency.items() if d)
+        if delays:
+            lines.append(
+                f"{label}: sensor latency as fitted, {delays} sample(s): each such channel "
+                "is compared with the simulation that many samples earlier"
+            )
     lines.append(
         "fit [%] = 100 (1 - |y - y_hat| / |y - mean(y)|); residual tests at 99 % "
         f"(lags up to {result.options.max_lag} samples)"

@@ -15,12 +15,21 @@ its parameter file shows. A coordinate measured only through its rate (a tachome
 with the measured rate as its velocity; outputs are the model's output map
 (``Model.output_map``) of the simulated states under the recording's inputs, whatever they
 measure (positions, speeds, a motor current).
+
+A sensor that reports its sample d samples late (``--latency`` of the fit,
+``FitOptions.latency_samples``) is compared as the fitter compares it: its channel advanced by
+d samples (``Dataset.delayed``), its last d samples not counted. A fit's parameter file keeps
+the latencies it was fitted with (``provenance.fit_options.latency_samples``:
+``sensor_latency``), so that ``validate`` replays the file as the fit scored it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
+from hframe_id.errors import ParameterFileError
 from hframe_id.fitting.dataset import Dataset
 from hframe_id.fitting.rest_state import rest_state
 from hframe_id.models import Model, build_model
@@ -29,17 +38,44 @@ from hframe_id.recordings.recording import Recording
 from hframe_id.simulation.open_loop import default_substeps, outputs_of, simulate
 
 
-def channels(model: Model, recording: Recording) -> Dataset:
+def sensor_latency(params: ParameterSet) -> dict[str, int]:
+    """The sensors' latencies [samples] per output that the fit which wrote ``params``
+    compared its channels with (``provenance.fit_options.latency_samples``); empty for a
+    file without them. ``ParameterFileError`` naming the file, field and value for one that
+    is not a whole number of samples in 0..100 (the fit's own range)."""
+    options = params.provenance.get("fit_options")
+    latency = options.get("latency_samples") if isinstance(options, Mapping) else None
+    if latency is None:
+        return {}
+    where = f"{params.where()}: provenance.fit_options.latency_samples"
+    if not isinstance(latency, Mapping):
+        raise ParameterFileError(f"{where} must map output names to samples, got {latency!r}")
+    for name, value in latency.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
+            raise ParameterFileError(
+                f"{where}[{name!r}] must be a whole number of samples in 0..100, got {value!r}"
+            )
+    return {str(name): int(value) for name, value in latency.items()}
+
+
+def channels(
+    model: Model, recording: Recording, latency: Mapping[str, int] | None = None
+) -> Dataset:
     """The recording on ``model``'s channels (``Dataset.from_recording``; checked by
-    ``checks.check_signals``)."""
-    return Dataset.from_recording(model, recording)
+    ``checks.check_signals``), each channel named in ``latency`` advanced by its latency
+    [samples] (``Dataset.delayed``)."""
+    return Dataset.from_recording(model, recording).delayed(latency or {})
 
 
 def simulate_channels(
-    params: ParameterSet, recording: Recording, x0: np.ndarray | None = None
+    params: ParameterSet,
+    recording: Recording,
+    x0: np.ndarray | None = None,
+    latency: Mapping[str, int] | None = None,
 ) -> tuple[Dataset, np.ndarray]:
-    """The recording's channels for ``params``'s model and their open-loop simulation, from
-    ``x0`` (default: ``rest_state``).
+    """The recording's channels for ``params``'s model (advanced by the sensors' ``latency``
+    [samples], ``channels``) and their open-loop simulation, from ``x0`` (default:
+    ``rest_state``).
 
     Returns
     -------
@@ -49,7 +85,7 @@ def simulate_channels(
     """
     model = build_model(params.variant)
     p = model.parameter_vector(params.values)
-    data = channels(model, recording)
+    data = channels(model, recording, latency)
     # the substeps first: values too stiff to simulate are refused by name there, before
     # the rest state's least squares fail on them without saying which (an r of 1e300 m)
     n_substeps = default_substeps(model, p, data.sample_period_s)
