@@ -41,9 +41,10 @@ from hframe_id.fitting.known_points import (
 )
 from hframe_id.fitting.local_fit import fit_in_box
 from hframe_id.fitting.multistart import judged, seeded_starts
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
+from hframe_id.fitting.open_ended import open_ends
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.progress import labelled, progress_sink
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.result import FitResult
 from hframe_id.fitting.start_screen import (
     Beginning,

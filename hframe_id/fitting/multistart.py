@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hframe_id.fitting.known_points import Criterion, judged_starts
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.parameters import ParameterSet
 
 #: Log-uniform factor range of a seeded start around the user's start.

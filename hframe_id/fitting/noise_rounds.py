@@ -44,8 +44,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.shooting import Evaluation, MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.stages import exact_stage

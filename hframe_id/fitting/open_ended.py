@@ -35,10 +35,8 @@ from dataclasses import dataclass
 
 from hframe_id.fitting.known_points import Criterion, judged_starts
 from hframe_id.fitting.problem import default_bounds
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.recordings.recording import Recording
-
-LIKELIHOOD_RATIO_95 = 0.5 * 3.841  # chi^2_1 95 % quantile / 2 (the criterion is chi^2 / 2)
-
 
 #: The scan, in exponents of the bound factor f: from the box's side (the previous box's
 #: bound, f^(1/2)) through the start (f^0) to the other side's bound (f^1 there).

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from hframe_id.fitting.fit_run import FitRun
+from hframe_id.fitting.resolution import resolution_interrupt
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import GaussNewton, SolverState, StageReport
 from hframe_id.fitting.solvers import solver_named
@@ -100,7 +101,16 @@ def solve(
         state = SolverState(start_nodes.copy(), theta.copy(), active.copy(), velocity_hint=velocity)
         if use_penalty:
             run.stages.append(penalty_stage(gn, state, smoothing, options, "all windows"))
-        run.stages.append(exact_stage(gn, state, "all windows", options.solver_options, radius=0.5))
+        run.stages.append(
+            exact_stage(
+                gn,
+                state,
+                "all windows",
+                options.solver_options,
+                radius=0.5,
+                interrupt=resolution_interrupt(ms),
+            )
+        )
         if run.stages[-1].converged:
             break
     run.add_evaluations(gn.evaluations)

@@ -36,9 +36,9 @@ import numpy as np
 
 from hframe_id.fitting.equation_error import equation_error_start
 from hframe_id.fitting.known_points import Criterion, Simulations, reference_points
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import FitProblem, build_problem
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.parameters import ParameterSet
 

@@ -67,7 +67,7 @@ class StrategySettings:
     restart_factors, restart_limit, restart_min_gain : restarts along the stiffnesses at an
         unmeasured coordinate: each moved by x/÷ each factor (> 1), at most ``restart_limit``
         solves, a restart kept when it is a better fit by a log-likelihood ratio above
-        ``restart_min_gain`` (2: a likelihood ratio of e^2; ``unmeasured.likelihood_gain``).
+        ``restart_min_gain`` (2: a likelihood ratio of e^2; ``resolution.likelihood_gain``).
     hold_misfit : an unconverged fit whose residual rms is above this many noise std is not
         worth holding parameters for identifiability (its error estimates mean nothing).
     hopeless_std : parameters whose relative standard error is above this are held together

@@ -57,10 +57,10 @@ from typing import TYPE_CHECKING
 from hframe_id.errors import FitError
 from hframe_id.fitting.known_points import Criterion, replayed_starts
 from hframe_id.fitting.multistart import SPREAD
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import DEFAULT_FREE
 from hframe_id.fitting.progress import labelled, progress_sink
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.models import build_model, declaration, variants
 from hframe_id.parameters import ParameterSet, load_parameter_file
 

@@ -19,6 +19,7 @@ import numpy as np
 from hframe_id.fitting.fit_run import FitRun, Fitted
 from hframe_id.fitting.output_error import solve
 from hframe_id.fitting.problem import FitProblem
+from hframe_id.fitting.resolution import likelihood_gain
 from hframe_id.fitting.shooting import MultipleShooting
 from hframe_id.fitting.solver import AT_BOUND
 
@@ -48,18 +49,6 @@ def springs_at_unmeasured_coordinates(problem: FitProblem, ms: MultipleShooting)
     force = ca.gradient(potential, x)[unmeasured.tolist()]
     coupled = {j for j in range(p.shape[0]) if ca.depends_on(force, p[j])}
     return [f for f, i in enumerate(problem.free) if i in coupled]
-
-
-def likelihood_gain(ms: MultipleShooting, before: float, after: float) -> float:
-    """The log-likelihood ratio of a fit whose cost (1/2 sum of squared weighted residuals)
-    fell from ``before`` to ``after``: the fall itself under the noise levels of the
-    weights, or, if smaller, n/2 log(before/after) under a common scale of the noise
-    estimated from the residuals (n of them): the two agree at the noise level, and far
-    above it (model mismatch) a fall of a few units is no evidence of a better mode."""
-    if not after > 0:
-        return before - after
-    half_n = before / ms.residual_rms(before) ** 2 if before > 0 else 0.0
-    return min(before - after, half_n * math.log(before / after))
 
 
 def restarts_along_unmeasured_springs(run: FitRun, best: Fitted) -> Fitted:

@@ -12,7 +12,8 @@ import pytest
 from scipy.stats import chi2
 
 from hframe_id.fitting import open_ended
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, OpenEnd, _open_end, open_ends
+from hframe_id.fitting.open_ended import OpenEnd, _open_end, open_ends
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 
 #: Start and bound factor of the stand-in fit: boxes x/÷ 16^(1/4), 16^(1/2), 16 give the scan
 #: values 100 x/÷ 2, 4, 8, 16, all exact in binary.

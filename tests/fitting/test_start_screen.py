@@ -7,8 +7,8 @@ import pytest
 
 from hframe_id.fitting import FitOptions
 from hframe_id.fitting.known_points import simulation_criterion
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.problem import build_problem
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.fitting.start_screen import EQUATION_ERROR, Beginning, screen_start
 
 

@@ -22,7 +22,8 @@ LATENCY = ("--latency", "phi1=1", "--latency", "x=3")
 #: The pulses put F_c (0.2 N in the model's file) near 0.02 N, on the default box's x/÷10
 #: bound: the default fit then opens friction to zero and fits again from the start, a
 #: second whole fit with its restarts (300 s of the suite on a 2-core machine, against
-#: 175 s). The box given at x/÷100 holds the answer inside it; the widening is tested in
+#: 175 s, before the all-window stages ended at the statistical resolution; 75 s since).
+#: The box given at x/÷100 holds the answer inside it; the widening is tested in
 #: tests/fitting/integration/test_open_ended_fits.py and test_information_share_fit.py.
 BOX = ("--bound-factor", "100")
 

@@ -10,7 +10,7 @@ import pytest
 
 from hframe_id.fitting import FitOptions, StrategySettings, fit_recordings
 from hframe_id.fitting.known_points import Criterion
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 from hframe_id.parameters import load_parameter_file
 from hframe_id.recordings.simulated import simulate_recording
 from hframe_id.rig.protocols import StepProtocol

@@ -7,7 +7,8 @@ from dataclasses import replace
 import pytest
 
 from hframe_id.fitting import FitOptions, fit_recordings
-from hframe_id.fitting.open_ended import LIKELIHOOD_RATIO_95, open_ends
+from hframe_id.fitting.open_ended import open_ends
+from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
 
 #: Sensors a million times noisier than the sim rig's (rad and m): no value of k_l within
 #: the box changes the simulated outputs by a visible amount.
