@@ -29,7 +29,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hframe_id.errors import ParameterFileError
+from hframe_id.errors import ParameterFileError, shown
 from hframe_id.fitting.dataset import Dataset
 from hframe_id.fitting.rest_state import rest_state
 from hframe_id.models import Model, build_model
@@ -49,11 +49,11 @@ def sensor_latency(params: ParameterSet) -> dict[str, int]:
         return {}
     where = f"{params.where()}: provenance.fit_options.latency_samples"
     if not isinstance(latency, Mapping):
-        raise ParameterFileError(f"{where} must map output names to samples, got {latency!r}")
+        raise ParameterFileError(f"{where} must map output names to samples, got {shown(latency)}")
     for name, value in latency.items():
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
             raise ParameterFileError(
-                f"{where}[{name!r}] must be a whole number of samples in 0..100, got {value!r}"
+                f"{where}[{shown(name)}] must be a whole number of samples in 0..100, got {shown(value)}"
             )
     return {str(name): int(value) for name, value in latency.items()}
 
