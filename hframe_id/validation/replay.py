@@ -53,7 +53,8 @@ def sensor_latency(params: ParameterSet) -> dict[str, int]:
     for name, value in latency.items():
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
             raise ParameterFileError(
-                f"{where}[{shown(name)}] must be a whole number of samples in 0..100, got {shown(value)}"
+                f"{where}[{shown(name)}] must be a whole number of samples in 0..100, "
+                f"got {shown(value)}"
             )
     return {str(name): int(value) for name, value in latency.items()}
 
