@@ -140,17 +140,7 @@ class ProblemOptions:
                 positive(f"recording_std[{shown(name)}][{k}]", value)
             per_recording[name] = tuple(float(v) for v in values)
         object.__setattr__(self, "recording_std", per_recording)
-        if not isinstance(self.latency_samples, Mapping):
-            raise OptionError(
-                "latency_samples must map output names to samples, "
-                f"got {shown(self.latency_samples)}"
-            )
-        for name, value in self.latency_samples.items():
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
-                raise OptionError(
-                    f"latency_samples[{shown(name)}] must be a whole number of samples in 0..100, "
-                    f"got {shown(value)}"
-                )
+        checked_latency(self.latency_samples)
 
     def _check_smoothing(self) -> None:
         """``smoothing``: None or two velocities > 0 [m/s, rad/s], stored as floats."""
@@ -243,3 +233,17 @@ class StatisticsOptions:
 
 #: The links of the chain, each handed its part of ``FitOptions``.
 LINK_OPTIONS = (ProblemOptions, TranscriptionOptions, SolverOptions, StatisticsOptions)
+
+
+def checked_latency(latency: object) -> dict[str, int]:
+    """``latency_samples`` (output name -> whole samples in 0..100 a sensor lags the plant)
+    as a dict; ``OptionError`` naming the entry that is not."""
+    if not isinstance(latency, Mapping):
+        raise OptionError(f"latency_samples must map output names to samples, got {shown(latency)}")
+    for name, value in latency.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
+            raise OptionError(
+                f"latency_samples[{shown(name)}] must be a whole number of samples in 0..100, "
+                f"got {shown(value)}"
+            )
+    return {str(name): int(value) for name, value in latency.items()}

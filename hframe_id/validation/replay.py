@@ -29,8 +29,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hframe_id.errors import ParameterFileError, shown
+from hframe_id.errors import OptionError, ParameterFileError
 from hframe_id.fitting.dataset import Dataset
+from hframe_id.fitting.link_options import checked_latency
 from hframe_id.fitting.rest_state import rest_state
 from hframe_id.models import Model, build_model
 from hframe_id.parameters import ParameterSet
@@ -47,16 +48,10 @@ def sensor_latency(params: ParameterSet) -> dict[str, int]:
     latency = options.get("latency_samples") if isinstance(options, Mapping) else None
     if latency is None:
         return {}
-    where = f"{params.where()}: provenance.fit_options.latency_samples"
-    if not isinstance(latency, Mapping):
-        raise ParameterFileError(f"{where} must map output names to samples, got {shown(latency)}")
-    for name, value in latency.items():
-        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 100:
-            raise ParameterFileError(
-                f"{where}[{shown(name)}] must be a whole number of samples in 0..100, "
-                f"got {shown(value)}"
-            )
-    return {str(name): int(value) for name, value in latency.items()}
+    try:
+        return checked_latency(latency)
+    except OptionError as error:
+        raise ParameterFileError(f"{params.where()}: provenance.fit_options.{error}") from None
 
 
 def channels(
