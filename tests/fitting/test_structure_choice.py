@@ -275,3 +275,93 @@ def test_a_larger_fit_that_ends_worse_than_the_smaller_is_fitted_again_from_its_
         assert choice.start is limited and math.isnan(choice.first_larger)
         assert choice.second_larger == -800.0 and choice.criteria[LARGER] == -900.0
         assert "fitted again from the hframe-8 fit's end, no better (-800)" in kept.message
+
+
+def _profiled(scores_by_title: dict, i_max_gain: dict):
+    """A judge for ``_larger_start``: a point's score is its base's (by title) minus
+    ``i_max_gain[title]`` when the limit is at the reference 8 A, and the base's score at
+    every other I_max (a limit that binds only at 8 A), no simulation."""
+
+    def judge(params):
+        base = params.title.split(",")[0]
+        score = scores_by_title[base]
+        if params.values.get("I_max") == 8.0:
+            score -= i_max_gain[base]
+        return score
+
+    return judge
+
+
+def _bases(*titles):
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    return [
+        dataclasses.replace(table.replace_values(k_l=table.values["k_l"] * (1 + k)), title=t)
+        for k, t in enumerate(titles)
+    ]
+
+
+def test_the_extra_parameter_is_profiled_at_the_start_and_the_screens_other_points():
+    """Step 1: the user's start wins unless another base is better by the likelihood ratio;
+    a base where the limit gains nothing is never chosen; none gains: no larger fit."""
+    from hframe_id.fitting.structure_choice import _larger_start
+
+    start, table41 = _bases("start", "table 4.1")
+    # the limit gains nothing at the start, 5 at Table 4.1: the larger fit begins there
+    chosen = _larger_start(
+        [start, table41],
+        LARGER,
+        "I_max",
+        _profiled({"start": 0, "table 4.1": 0}, {"start": 0, "table 4.1": 5}),
+    )
+    assert chosen.title.startswith("table 4.1") and chosen.values["I_max"] == 8.0
+    assert chosen.variant == LARGER
+    # both gain; Table 4.1 better by less than 1.92: the start wins the tie
+    chosen = _larger_start(
+        [start, table41],
+        LARGER,
+        "I_max",
+        _profiled({"start": 0, "table 4.1": -1}, {"start": 1, "table 4.1": 1}),
+    )
+    assert chosen.title.startswith("start")
+    # ... and by more: Table 4.1
+    chosen = _larger_start(
+        [start, table41],
+        LARGER,
+        "I_max",
+        _profiled({"start": 0, "table 4.1": -3}, {"start": 1, "table 4.1": 1}),
+    )
+    assert chosen.title.startswith("table 4.1")
+    # a base that is better but where the limit gains nothing is not a start of the larger fit
+    chosen = _larger_start(
+        [start, table41],
+        LARGER,
+        "I_max",
+        _profiled({"start": 0, "table 4.1": -50}, {"start": 1, "table 4.1": 0}),
+    )
+    assert chosen.title.startswith("start")
+    assert (
+        _larger_start(
+            [start, table41],
+            LARGER,
+            "I_max",
+            _profiled({"start": 0, "table 4.1": 0}, {"start": 0, "table 4.1": 0}),
+        )
+        is None
+    )
+
+
+def test_the_profile_bases_leave_out_the_equation_error_estimate():
+    from hframe_id.fitting.start_screen import EQUATION_ERROR, ScreenedStart
+    from hframe_id.fitting.structure_choice import _profile_bases
+
+    start, regressed, table41 = _bases("start", "regressed", "table 4.1")
+    assert _profile_bases(start, None) == [start]
+    screen = ScreenedStart(
+        "the start",
+        start,
+        {},
+        (("the start", start), (EQUATION_ERROR, regressed), ("Table 4.1", table41)),
+    )
+    assert _profile_bases(start, screen) == [start, table41]
+    # a screen that did not run (a record in motion) judged nothing: the start only
+    assert _profile_bases(start, ScreenedStart("the start", start, {}, skipped="off")) == [start]
