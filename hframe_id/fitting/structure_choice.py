@@ -132,7 +132,7 @@ class StructureChoice:
         if not self.tried:
             return (
                 f"{self.larger} not tried: no {self.extra} within x/÷2 of its reference "
-                f"improved on {self.asked} at the start"
+                f"improved on {self.asked} at the start or the model's reference files"
             )
         if self.failure:
             return f"{self.asked} kept: the {self.larger} fit {self.failure}"
