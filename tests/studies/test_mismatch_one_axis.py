@@ -1,5 +1,5 @@
-"""The one-axis mismatch study: one trial on the shipped plant (a fit of about 10 s), its
-pulses against the shipped datasets' protocol, and its options."""
+"""The one-axis mismatch study: one trial on the shipped plant, its pulses against the shipped
+datasets' protocol, and its options."""
 
 import math
 
@@ -7,6 +7,7 @@ import pytest
 import yaml
 
 from hframe_id.errors import OptionError
+from hframe_id.fitting import FitOptions
 from hframe_id.parameters import load_parameter_file
 from hframe_id.resources import datasets_dir
 from studies import mismatch_one_axis
@@ -38,7 +39,14 @@ def test_pulses_are_the_shipped_datasets_protocol():
 
 
 def test_one_trial_on_the_shipped_plant():
-    trial = run_trial(-1)
+    """The trial's plumbing: fit, held-out records, the plant's reduction, the line. The
+    study's default fit of these pulses (all nine parameters free) takes 90 s on a 2-core
+    machine and ends worse than its start
+    (docs/studies/2026-11-29-the-all-window-stages-end-at-the-statistical-resolution.md);
+    whole one-axis fits of mismatched pulses are tested in
+    tests/fitting/integration/test_mismatch_fits.py. Here two friction parameters are free,
+    which every part of the trial's output covers."""
+    trial = run_trial(-1, options=FitOptions(free=("b", "F_c")))
     assert trial.seed == -1 and trial.train == "pulses"
     assert isinstance(trial.success, bool) and trial.message
     assert math.isfinite(trial.max_defect) and trial.wall_time_s > 0
