@@ -300,54 +300,37 @@ def _bases(*titles):
     ]
 
 
-def test_the_extra_parameter_is_profiled_at_the_start_and_the_screens_other_points():
+@pytest.mark.parametrize(
+    ("scores", "gains", "chosen"),
+    [
+        # the limit gains nothing at the start, 5 at Table 4.1: the larger fit begins there
+        ((0, 0), (0, 5), "table 4.1"),
+        # both gain; Table 4.1 better by less than 1.92: the start wins the tie
+        ((0, -1), (1, 1), "start"),
+        # ... and by more: Table 4.1
+        ((0, -3), (1, 1), "table 4.1"),
+        # a base better but where the limit gains nothing is not a start of the larger fit
+        ((0, -50), (1, 0), "start"),
+        # no base gains: no larger fit
+        ((0, 0), (0, 0), None),
+    ],
+)
+def test_the_extra_parameter_is_profiled_at_the_start_and_the_screens_other_points(
+    scores, gains, chosen
+):
     """Step 1: the user's start wins unless another base is better by the likelihood ratio;
     a base where the limit gains nothing is never chosen; none gains: no larger fit."""
     from hframe_id.fitting.structure_choice import _larger_start
 
-    start, table41 = _bases("start", "table 4.1")
-    # the limit gains nothing at the start, 5 at Table 4.1: the larger fit begins there
-    chosen = _larger_start(
-        [start, table41],
-        LARGER,
-        "I_max",
-        _profiled({"start": 0, "table 4.1": 0}, {"start": 0, "table 4.1": 5}),
-    )
-    assert chosen.title.startswith("table 4.1") and chosen.values["I_max"] == 8.0
-    assert chosen.variant == LARGER
-    # both gain; Table 4.1 better by less than 1.92: the start wins the tie
-    chosen = _larger_start(
-        [start, table41],
-        LARGER,
-        "I_max",
-        _profiled({"start": 0, "table 4.1": -1}, {"start": 1, "table 4.1": 1}),
-    )
-    assert chosen.title.startswith("start")
-    # ... and by more: Table 4.1
-    chosen = _larger_start(
-        [start, table41],
-        LARGER,
-        "I_max",
-        _profiled({"start": 0, "table 4.1": -3}, {"start": 1, "table 4.1": 1}),
-    )
-    assert chosen.title.startswith("table 4.1")
-    # a base that is better but where the limit gains nothing is not a start of the larger fit
-    chosen = _larger_start(
-        [start, table41],
-        LARGER,
-        "I_max",
-        _profiled({"start": 0, "table 4.1": -50}, {"start": 1, "table 4.1": 0}),
-    )
-    assert chosen.title.startswith("start")
-    assert (
-        _larger_start(
-            [start, table41],
-            LARGER,
-            "I_max",
-            _profiled({"start": 0, "table 4.1": 0}, {"start": 0, "table 4.1": 0}),
-        )
-        is None
-    )
+    bases = _bases("start", "table 4.1")
+    titles = ("start", "table 4.1")
+    judge = _profiled(dict(zip(titles, scores, strict=True)), dict(zip(titles, gains, strict=True)))
+    start = _larger_start(bases, LARGER, "I_max", judge)
+    if chosen is None:
+        assert start is None
+    else:
+        assert start.title.startswith(chosen) and start.values["I_max"] == 8.0
+        assert start.variant == LARGER
 
 
 def test_the_profile_bases_leave_out_the_equation_error_estimate():
