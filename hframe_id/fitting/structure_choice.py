@@ -67,7 +67,7 @@ from hframe_id.fitting.options import FitOptions
 from hframe_id.fitting.problem import DEFAULT_FREE
 from hframe_id.fitting.progress import labelled, progress_sink
 from hframe_id.fitting.resolution import LIKELIHOOD_RATIO_95
-from hframe_id.fitting.start_screen import EQUATION_ERROR
+from hframe_id.fitting.start_screen import EQUATION_ERROR, ScreenedStart
 from hframe_id.models import build_model, declaration, variants
 from hframe_id.parameters import ParameterSet, load_parameter_file
 
@@ -237,7 +237,7 @@ def _larger_start(
     return other if best_other < at_start - LIKELIHOOD_RATIO_95 else start
 
 
-def _profile_bases(initial: ParameterSet, screen) -> list[ParameterSet]:
+def _profile_bases(initial: ParameterSet, screen: ScreenedStart | None) -> list[ParameterSet]:
     """Where the larger model's extra parameter is profiled (step 1 of the module's doc): the
     user's start, then every other point the smaller fit's start screen judged but the
     equation-error estimate (the smaller model fitted to the data, bent around what it
