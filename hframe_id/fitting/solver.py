@@ -159,9 +159,15 @@ class GaussNewton(CondensedModel):
         #: optimum; far from it a parameter can look undetermined only transiently).
         self.freeze_sloppy = freeze_sloppy
 
-    def _evaluate(self, state: SolverState, nodes, theta, smoothing) -> Evaluation:
+    def _evaluate(
+        self, state: SolverState, nodes, theta, smoothing, derivatives: bool = True
+    ) -> Evaluation:
+        """The transcription at (nodes, theta), its windows split by ``state``'s velocity hint;
+        without ``derivatives``, residuals only (a trial step, judged by its merit alone)."""
         self.evaluations += 1
-        return self.ms.evaluate(nodes, theta, smoothing, velocity_hint=state.velocity_hint)
+        return self.ms.evaluate(
+            nodes, theta, smoothing, velocity_hint=state.velocity_hint, derivatives=derivatives
+        )
 
     def _close_by_simulation(self, state: SolverState, ev: Evaluation, smoothing, merit_now):
         """At a stall with small defects left (typically velocities at rest, where closing
@@ -342,7 +348,7 @@ class GaussNewton(CondensedModel):
                 walk.predicted = out.current - (ev.cost + change)
             else:
                 walk.predicted = -change
-            trial = self._evaluate(state, nodes_new, theta_new, smoothing)
+            trial = self._evaluate(state, nodes_new, theta_new, smoothing, derivatives=False)
             if wall is None and trial.n_substeps[1] > ms.transcription.max_substeps:
                 wall = StiffnessWall.at(ms, state.theta, index, smoothing)
                 continue
@@ -372,6 +378,9 @@ class GaussNewton(CondensedModel):
             if ok:
                 out.accepted = True
                 out.step = float(np.max(np.abs(d), initial=0.0))
+                # The next iteration's linearization: the same integration (the same
+                # velocity hint, so bitwise the same trajectory) with its sensitivities.
+                trial = self._evaluate(state, nodes_new, theta_new, smoothing)
                 out.nodes, out.theta, out.evaluation = nodes_new, theta_new, trial
                 break
             out.full_step = False
@@ -463,7 +472,7 @@ class GaussNewton(CondensedModel):
         for alpha in (0.5, 0.25, 0.125):
             nodes_a = state.nodes + alpha * dnodes
             theta_a = state.theta + alpha * dtheta
-            trial_a = self._evaluate(state, nodes_a, theta_a, smoothing)
+            trial_a = self._evaluate(state, nodes_a, theta_a, smoothing, derivatives=False)
             new_a = walk.merit(trial_a, nodes_a)
             model = cost + alpha * rjd + 0.5 * alpha**2 * jdjd
             predicted_a = current - (model + (1 - alpha) * penalty_now)

@@ -128,3 +128,44 @@ def test_an_interrupt_ends_an_exact_stage_with_its_message(shooting_setup):
     assert report.iterations >= window + 1
     assert report.cost == asked[-1][0] == state.evaluation.cost
     assert all(np.isfinite(decrease) for _, decrease in asked)
+
+
+def test_trial_steps_are_judged_on_residuals_and_linearized_only_where_accepted(
+    shooting_setup, monkeypatch
+):
+    """A trial step is judged by its merit alone: it is integrated without sensitivities
+    (about 5x cheaper on the realistic steps), and the accepted point once more with them,
+    for the next linearization. The walk is the one that evaluates every trial with its
+    sensitivities: the residual-only trajectory is bitwise the one with sensitivities."""
+    problem, ms, nodes, _ = shooting_setup
+    theta = np.full(ms.nf, 1.0)  # every free parameter x 2.7: a walk with rejected trials
+    calls = []
+    evaluate = MultipleShooting.evaluate
+
+    def counted(self, *args, derivatives=True, **kwargs):
+        calls.append(derivatives)
+        return evaluate(self, *args, derivatives=derivatives, **kwargs)
+
+    def walk(always_linearize: bool):
+        calls.clear()
+        state = SolverState(nodes.copy(), theta.copy(), np.ones(ms.nf, dtype=bool))
+        gn = GaussNewton(ms)
+        if always_linearize:
+            monkeypatch.setattr(MultipleShooting, "evaluate", evaluate)
+            gn._evaluate = lambda st, n, t, s, derivatives=True: GaussNewton._evaluate(
+                gn, st, n, t, s
+            )
+        else:
+            monkeypatch.setattr(MultipleShooting, "evaluate", counted)
+        report = gn.run(state, "exact", problem.smoothing, 30, 1e-12, 1e-3, watchdog=False)
+        return report, state, list(calls)
+
+    report, state, calls = walk(always_linearize=False)
+    # One linearization at the start and one per accepted step; every trial residual-only.
+    accepted = sum(calls) - 1
+    trials = calls.count(False)
+    assert 0 < accepted < trials, "the walk must reject a trial for this test to mean anything"
+    reference, reference_state, _ = walk(always_linearize=True)
+    assert report.cost == reference.cost and report.iterations == reference.iterations
+    assert np.array_equal(state.theta, reference_state.theta)
+    assert np.array_equal(state.evaluation.jac_theta, reference_state.evaluation.jac_theta)

@@ -123,8 +123,8 @@ def test_a_step_refused_for_stiffness_slides_along_the_wall(table):
     refused, accepted = [], []
     evaluate, accept = gn._evaluate, gn._accept
 
-    def counting(state, nodes, theta, smoothing):
-        ev = evaluate(state, nodes, theta, smoothing)
+    def counting(state, nodes, theta, smoothing, derivatives=True):
+        ev = evaluate(state, nodes, theta, smoothing, derivatives)
         refused.append(ev.n_substeps[1] > cap)
         return ev
 
