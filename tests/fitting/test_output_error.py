@@ -160,3 +160,37 @@ def test_every_model_evaluation_is_counted(run, monkeypatch, defer):
     output_error.solve(at, START, np.ones(3, dtype=bool), prepass=True, defer_on_mismatch=defer)
     assert sum(gn.evaluations > 0 for gn in built) >= 2  # a state estimate, the moving windows
     assert at.counter["evaluations"] == sum(gn.evaluations for gn in built) + int(defer)
+
+
+@pytest.mark.parametrize(
+    ("noise", "defer", "prepass", "gives_up"),
+    [
+        ("auto", True, False, True),  # its end only the noise rounds' start
+        ("auto", False, False, False),  # a restart or a hold: judged by its converged end
+        ("sensor", True, False, False),  # no rounds to hand over to
+        ("auto", True, True, False),  # with a pre-pass only a converged stage defers
+    ],
+)
+def test_the_fallback_gives_up_like_the_fast_path_only_where_the_rounds_take_over(
+    run, monkeypatch, noise, defer, prepass, gives_up
+):
+    """The moving windows' fast path gives up on slow progress far from the noise level
+    (``fast_path_patience``); its penalty fallback's exact stage does so too only where a
+    result far above the sensors' noise is deferred to the noise rounds."""
+    from hframe_id.fitting.solver import GaussNewton
+
+    give_ups = []
+    run_stage = GaussNewton.run
+
+    def recording(self, state, stage, *args, give_up=None, **kwargs):
+        if stage == "moving windows":
+            give_ups.append(give_up)
+            if len(give_ups) == 1:  # the fast path fails: the fallback runs
+                return StageReport(stage, (0.0, 0.0), 1, False, "stood in", 0.0, 0.0, 0.0)
+        return run_stage(self, state, stage, *args, give_up=give_up, **kwargs)
+
+    monkeypatch.setattr(GaussNewton, "run", recording)
+    at = run(noise=noise, strategy=TINY_MISMATCH)
+    output_error.solve(at, START, np.ones(3, dtype=bool), prepass=prepass, defer_on_mismatch=defer)
+    patience = StrategySettings().fast_path_patience
+    assert give_ups == [patience, patience if gives_up else None]
