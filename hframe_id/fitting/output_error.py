@@ -62,10 +62,12 @@ def solve(
     moving = ms.moving_windows(velocity, smoothing) if options.first_stage else np.arange(0)
     mismatch, moving_rms = False, math.nan
     if 0 < moving.size < ms.n_windows:
+        may_defer = defer_on_mismatch and options.noise != "sensor"
         # Without ``prepass``, the moving windows' outcome under mismatch is only a start
         # for the noise rounds: its fallback may give up as the fast path does.
-        defers = defer_on_mismatch and options.noise != "sensor" and not prepass
-        nodes, theta, moving_rms = _moving_window_stages(run, moving, nodes, theta, active, defers)
+        nodes, theta, moving_rms = _moving_window_stages(
+            run, moving, nodes, theta, active, defers=may_defer and not prepass
+        )
         # With a coordinate no output measures (``prepass``: one-axis), only a converged
         # stage is evidence of mismatch: one that stalled far from the data may be the
         # idler's multimodal mode from a poor start (a held idler 10-20 % off), which the
@@ -74,8 +76,7 @@ def solve(
         # stage still counts: the rule was tried there on three realistic plants only,
         # which it did not improve. docs/fitting.md, "Held parameters".
         mismatch = (
-            defer_on_mismatch
-            and options.noise != "sensor"
+            may_defer
             and (run.stages[-1].converged or not prepass)
             and moving_rms > options.strategy.mismatch_rms
         )

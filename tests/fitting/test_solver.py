@@ -134,7 +134,7 @@ def test_trial_steps_are_judged_on_residuals_and_linearized_only_where_accepted(
     shooting_setup, monkeypatch
 ):
     """A trial step is judged by its merit alone: it is integrated without sensitivities
-    (about 5x cheaper on the realistic steps), and the accepted point once more with them,
+    (4-5x cheaper on a stick-slip plant's six steps), and the accepted point once more with them,
     for the next linearization. The walk is the one that evaluates every trial with its
     sensitivities: the residual-only trajectory is bitwise the one with sensitivities."""
     problem, ms, nodes, _ = shooting_setup
@@ -150,6 +150,8 @@ def test_trial_steps_are_judged_on_residuals_and_linearized_only_where_accepted(
         calls.clear()
         state = SolverState(nodes.copy(), theta.copy(), np.ones(ms.nf, dtype=bool))
         gn = GaussNewton(ms)
+        accept = gn._accept
+        gn._accept = lambda *args: (calls.append("accepted"), accept(*args))
         if always_linearize:
             monkeypatch.setattr(MultipleShooting, "evaluate", evaluate)
             gn._evaluate = lambda st, n, t, s, derivatives=True: GaussNewton._evaluate(
@@ -161,10 +163,12 @@ def test_trial_steps_are_judged_on_residuals_and_linearized_only_where_accepted(
         return report, state, list(calls)
 
     report, state, calls = walk(always_linearize=False)
-    # One linearization at the start and one per accepted step; every trial residual-only.
-    accepted = sum(calls) - 1
-    trials = calls.count(False)
+    accepted, trials = calls.count("accepted"), calls.count(False)
     assert 0 < accepted < trials, "the walk must reject a trial for this test to mean anything"
+    # One linearization at the start and one per accepted step, each right before its
+    # acceptance; every trial residual-only.
+    assert calls.count(True) == 1 + accepted and calls[0] is True
+    assert all(calls[i - 1] is True for i, c in enumerate(calls) if c == "accepted")
     reference, reference_state, _ = walk(always_linearize=True)
     assert report.cost == reference.cost and report.iterations == reference.iterations
     assert np.array_equal(state.theta, reference_state.theta)
