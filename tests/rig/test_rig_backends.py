@@ -45,6 +45,24 @@ def emulator(*options: str, params: Path = HFRAME, seed: int = SEED) -> Iterator
         process.wait(timeout=10)
 
 
+# The link is not the subject of these tests unless a test says so: a link timeout far above a
+# loaded machine's scheduling pauses (the default 0.1 s has been exceeded by the first sample
+# with the suite on both cores, and by a pause on a load average of 12).
+PATIENT_LINK_TIMEOUT_S = 5.0
+
+
+@contextmanager
+def emulated_rig(
+    *options: str, link_timeout_s: float = PATIENT_LINK_TIMEOUT_S, **rig_options
+) -> Iterator[SerialRig]:
+    """The host side of an emulated device started with ``options``; closed on exit."""
+    with (
+        emulator(*options) as port,
+        SerialRig(port, link_timeout_s=link_timeout_s, **rig_options) as rig,
+    ):
+        yield rig
+
+
 @contextmanager
 def open_rig(backend: str, travel: dict | None = None) -> Iterator[Rig]:
     if backend == "sim":
@@ -55,12 +73,8 @@ def open_rig(backend: str, travel: dict | None = None) -> Iterator[Rig]:
     options = ["--lockstep"]
     for axis, (low, high) in (travel or {}).items():
         options += ["--travel", axis, str(low), str(high)]
-    with emulator(*options) as port:
-        rig = SerialRig(port)
-        try:
-            yield rig
-        finally:
-            rig.close()
+    with emulated_rig(*options) as rig:
+        yield rig
 
 
 BACKENDS = ["sim", "serial"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_rig_backends import emulator
+from test_rig_backends import PATIENT_LINK_TIMEOUT_S, emulated_rig, emulator
 
 from hframe_id.errors import RigFault
 from hframe_id.recordings.reader import SequenceGapWarning, read_recording
@@ -59,7 +59,7 @@ def test_payload_limit():
 
 
 def test_corrupted_frames_are_lost_samples_not_a_fault(tmp_path):
-    with emulator("--lockstep", "--corrupt-every", "50") as port, SerialRig(port) as rig:
+    with emulated_rig("--lockstep", "--corrupt-every", "50") as rig:
         summary = run_experiment(rig, STEP, RunOptions(out=tmp_path / "c.mcap"))
     # Sequences 49, 99, ..., 299 were corrupted; the last one ends the run (nothing follows).
     assert not summary.aborted and summary.crc_errors >= 6 and summary.lost_samples == 6
@@ -70,7 +70,7 @@ def test_corrupted_frames_are_lost_samples_not_a_fault(tmp_path):
 
 
 def test_dropped_frames_are_lost_samples(tmp_path):
-    with emulator("--lockstep", "--drop-every", "40") as port, SerialRig(port) as rig:
+    with emulated_rig("--lockstep", "--drop-every", "40") as rig:
         summary = run_experiment(rig, STEP, RunOptions(out=tmp_path / "d.mcap"))
     assert not summary.aborted and summary.lost_samples == 7 and summary.gaps == 7
     assert summary.crc_errors == 0
@@ -90,10 +90,7 @@ def test_link_fault_aborts_the_run_and_finishes_the_file(tmp_path, fault, timeou
     """Link timeouts far above a loaded machine's scheduling pauses (the default 0.1 s was
     once exceeded by a pause before the disconnect on a load average of 12), so that only the
     injected fault can end the run."""
-    with (
-        emulator("--lockstep", fault, "120") as port,
-        SerialRig(port, link_timeout_s=timeout_s) as rig,
-    ):
+    with emulated_rig("--lockstep", fault, "120", link_timeout_s=timeout_s) as rig:
         summary = run_experiment(rig, STEP, RunOptions(out=tmp_path / "f.mcap"))
     assert summary.aborted and message in summary.abort_reason
     recording = read_recording(tmp_path / "f.mcap")
@@ -105,7 +102,7 @@ def test_device_watchdog_drops_the_outputs_when_commands_stop():
     # Real time here: the watchdog runs on the device's own clock. The host may lag behind
     # the device on a loaded machine (samples wait in the OS buffer), so the checks look for
     # what must happen eventually rather than at a given sample.
-    with emulator() as port, SerialRig(port, watchdog_ms=20) as rig:
+    with emulated_rig(watchdog_ms=20) as rig:
         rig.start()
         sample = rig.read()
         rig.set_voltages(sample.sequence, [3.0, 3.0])
@@ -123,14 +120,8 @@ def test_device_watchdog_drops_the_outputs_when_commands_stop():
 
 def test_device_cuts_the_outputs_on_a_limit_switch_whatever_the_host_commands():
     # Limit switch 2 mm from the start: -6 V y-motion reaches y_max within ~0.1 s. The host
-    # here keeps commanding -6 V (a host without the logger's own limit check). The device
-    # answers each command (lockstep); a link timeout far above a loaded machine's
-    # scheduling pauses (the default 0.1 s was exceeded by the first sample with a fit
-    # running beside the suite), as in the link-fault test: the link is not the subject.
-    with (
-        emulator("--lockstep", "--travel", "y", "-0.25", "0.002") as port,
-        SerialRig(port, link_timeout_s=5.0) as rig,
-    ):
+    # here keeps commanding -6 V (a host without the logger's own limit check).
+    with emulated_rig("--lockstep", "--travel", "y", "-0.25", "0.002") as rig:
         rig.start()
         samples = [rig.read()]
         for _ in range(300):
@@ -147,7 +138,7 @@ def test_device_cuts_the_outputs_on_a_limit_switch_whatever_the_host_commands():
 
 
 def test_real_time_run_records_every_sample(tmp_path):
-    with emulator() as port, SerialRig(port) as rig:
+    with emulated_rig() as rig:
         summary = run_experiment(rig, STEP, RunOptions(out=tmp_path / "rt.mcap"))
     recording = read_recording(tmp_path / "rt.mcap")
     assert not summary.aborted
@@ -167,7 +158,8 @@ def test_record_command_on_the_serial_rig(tmp_path, capsys):
     out = tmp_path / "serial.mcap"
     with emulator("--lockstep") as port:
         argv = ["record", "--rig", "serial", "--port", port, "--v1", "-4", "--v2", "4",
-                "--step", "0.1", "--duration", "0.15", "--out", str(out)]  # fmt: skip
+                "--step", "0.1", "--duration", "0.15",
+                "--link-timeout", str(PATIENT_LINK_TIMEOUT_S), "--out", str(out)]  # fmt: skip
         assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "samples        150 of 150 planned" in printed and "aborted        no" in printed
