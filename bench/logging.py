@@ -27,11 +27,14 @@ REAL_TIME_S = 2.0
 
 
 def _message(k: int) -> dict:
+    """Sample ``k`` of a plausible record: the lasers' valid readings stay inside their
+    +/-5 cm range (the reader refuses a valid reading beyond it), the x laser's ramp
+    starting over every 4,000 samples."""
     return {
         "sequence": k, "device_time_us": 1000 * k, "u1_V": -4.0, "u2_V": 4.0,
         "applied1_V": -4.0, "applied2_V": 4.0, "encoder1_counts": -3 * k,
         "encoder2_counts": 3 * k, "phi1_rad": -5.87e-5 * k, "phi2_rad": 5.87e-5 * k,
-        "laser_x_m": 1.234567e-5 * k, "laser_x_valid": True, "laser_y_m": 3.3e-7 * k,
+        "laser_x_m": 1.234567e-5 * (k % 4000), "laser_x_valid": True, "laser_y_m": 3.3e-7 * k,
         "laser_y_valid": True, "limit_x_min": False, "limit_x_max": False,
         "limit_y_min": False, "limit_y_max": False, "command_sequence": k - 1,
         "watchdog": False,
