@@ -71,6 +71,11 @@ def test_hframe8_nests_in_the_current_limited_variant():
             "95 % likelihood ratio",
         ),
         (
+            {"chosen": "hframe-8", "evidence_scale": 0.001},
+            "hframe-8 kept, hframe-8-current-limit not better",
+            "once scaled for correlated residuals (gain x0.001: 0.5)",
+        ),
+        (
             {"chosen": "hframe-8", "extra_relative_std": 0.5},
             "hframe-8 kept, I_max poorly determined",
             "relative std 0.5",
@@ -348,3 +353,62 @@ def test_the_profile_bases_leave_out_the_equation_error_estimate():
     assert _profile_bases(start, screen) == [start, table41]
     # a screen that did not run (a record in motion) judged nothing: the start only
     assert _profile_bases(start, ScreenedStart("the start", start, {}, skipped="off")) == [start]
+
+
+@pytest.mark.parametrize(
+    ("gain", "kept"),
+    [(3.6, "hframe-8"), (1000.0, LARGER)],
+)
+def test_a_gain_within_what_correlated_residuals_give_does_not_keep_the_larger_model(
+    monkeypatch, small_result, gain, kept
+):
+    """Test plant 1294 (linear: no limit): the limited fit gained 3.6 with I_max identified
+    (robust relative std 0.0065, textbook 0.00164), over the likelihood ratio 1.92 for
+    independent errors but 0.23 once scaled by the textbook over robust variance; hframe-8 is
+    kept (and fitted again from the limited fit's end, step 4). A gain of 1,000 (scaled 63)
+    keeps the limit."""
+    from hframe_id.fitting.noise_rounds import NoiseReport
+    from hframe_id.fitting.result import ParameterEstimate
+
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
+    first = small_result().with_diagnostics(noise=NoiseReport(rounds=2, channels={}))
+    binding = ParameterEstimate(
+        "I_max", "A", 8.0, 8.6, 0.056, (8.49, 8.71), True, True, 0.0065, 0.00164
+    )
+    larger = small_result(
+        parameters=limited.replace_values(I_max=8.6),
+        estimates={**first.estimates, "I_max": binding},
+    )
+    again = small_result(parameters=table.replace_values(k_l=11500.0))
+    criteria = {
+        id(first.parameters): -1000.0,
+        id(larger.parameters): -1000.0 - gain,
+        id(again.parameters): -1000.0,
+    }
+    _judged_by(monkeypatch, criteria, limited)
+
+    def fit(recordings, start, options):
+        return larger if start.variant == LARGER else dataclasses.replace(again, initial=start)
+
+    options = FitOptions().for_model("hframe-8")
+    choice = with_structure_choice([], table, options, first, fit=fit).diagnostics.structure
+    assert choice.chosen == kept
+    assert choice.evidence_scale == pytest.approx((0.00164 / 0.0065) ** 2)
+    assert choice.scaled_gain == pytest.approx(gain * (0.00164 / 0.0065) ** 2)
+
+
+def test_the_evidence_scale_never_inflates_a_gain():
+    """The textbook over robust variance, at most 1; 1 where a std is missing."""
+    from hframe_id.fitting.result import ParameterEstimate
+    from hframe_id.fitting.structure_choice import _evidence_scale
+
+    def estimate(robust, textbook):
+        return ParameterEstimate("I_max", "A", 8.0, 8.0, 0.1, (7.0, 9.0), True, True,
+                                 robust, textbook)  # fmt: skip
+
+    assert _evidence_scale(estimate(0.02, 0.01)) == pytest.approx(0.25)
+    assert _evidence_scale(estimate(0.01, 0.02)) == 1.0
+    assert _evidence_scale(estimate(0.0, 0.01)) == 1.0
+    assert _evidence_scale(estimate(math.inf, 0.01)) == 1.0
+    assert _evidence_scale(estimate(0.01, 0.0)) == 1.0
