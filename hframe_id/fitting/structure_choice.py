@@ -178,8 +178,8 @@ class StructureChoice:
             return f"{self.larger} kept: {numbers}"
         if not math.isnan(self.continued):
             return (
-                f"{self.asked} kept, fitted again from the {self.larger} fit's end, which it "
-                f"does not need: criterion {self.continued:.6g} against "
+                f"{self.asked} kept, fitted again from the {self.larger} fit's end without "
+                f"{self.extra}: criterion {self.continued:.6g} against "
                 f"{self.criteria[self.asked]:.6g} for the first {self.asked} fit ({numbers})"
             )
         if not self.larger_success:
