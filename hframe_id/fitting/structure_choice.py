@@ -327,12 +327,6 @@ def with_structure_choice(
         else:
             second_larger = second
     estimate = other.estimates[extra]
-    scale = _evidence_scale(estimate)
-    keep = (
-        other.success
-        and (criteria[asked] - criteria[larger]) * scale > LIKELIHOOD_RATIO_95
-        and estimate.identified
-    )
     choice = StructureChoice(
         asked,
         larger,
@@ -343,11 +337,14 @@ def with_structure_choice(
         extra_value=estimate.estimate,
         extra_relative_std=estimate.relative_std,
         larger_success=other.success,
-        chosen=larger if keep else asked,
+        chosen=asked,
         first_larger=first_larger,
         second_larger=second_larger,
-        evidence_scale=scale,
+        evidence_scale=_evidence_scale(estimate),
     )
+    keep = other.success and choice.scaled_gain > LIKELIHOOD_RATIO_95 and estimate.identified
+    if keep:
+        choice = replace(choice, chosen=larger)
     better = criteria[larger] < criteria[asked] - LIKELIHOOD_RATIO_95
     if keep or not (other.success and better):
         return _chosen(other if keep else result, choice)
