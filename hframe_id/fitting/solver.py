@@ -69,6 +69,23 @@ class StageReport:
         return cls(name, after.smoothing, 0, True, message, cost, max_defect, 0.0)
 
 
+def _watchdog_verdict(
+    ratio: float, new: float, current: float, best: float, free: bool, factor: float
+) -> tuple[float, bool]:
+    """(ratio the trust region adapts to, accepted) for an exact stage's step under the
+    watchdog, from its merit ratio (actual / predicted decrease) and the merits ``new``,
+    ``current`` before it and ``best`` so far. Accepted: any finite merit in the ``free``
+    first steps (they close the last stage's defects), then one below ``factor`` x best.
+    The region shrinks only on an increase, and on every refusal: a step refused with the
+    region unchanged is tried again, forever (issue 25's test plant 1262: the current merit
+    above ``factor`` x best after mu rose, steps halving it refused for 35 min)."""
+    if not np.isfinite(new):
+        return ratio, False
+    if not (free or new < factor * best):
+        return -1.0, False
+    return (max(ratio, 0.5) if new <= current else ratio), True
+
+
 def _penalty_parameter(mu: float, change: float, l1: float, rho: float) -> float:
     """The l1 penalty parameter for a step that closes the linearised defects.
 
@@ -358,9 +375,15 @@ class GaussNewton(CondensedModel):
             if abs(predicted) <= 1e-9 * (abs(current) + 1.0) and new <= current:
                 # At the optimum the predicted gain is rounding noise: no verdict.
                 ratio = 0.5
-            if not walk.monotone and new <= current:
-                # Exact stages judge steps by the watchdog; shrink only on an increase.
-                ratio = max(ratio, 0.5)
+            if not walk.monotone:
+                ratio, ok = _watchdog_verdict(
+                    ratio,
+                    new,
+                    current,
+                    walk.best[0],
+                    iterations <= settings.free_steps,
+                    settings.watchdog_factor,
+                )
             self._adapt_region(walk, ratio, new, float(np.linalg.norm(d)), index.size)
             if walk.monotone and penalty is None and not (np.isfinite(new) and ratio > 1e-4):
                 # The defect-closing part of the step is not limited by the trust region
@@ -371,10 +394,6 @@ class GaussNewton(CondensedModel):
                     ratio, d = 0.5, alpha * d
             if walk.monotone:
                 ok = np.isfinite(new) and ratio > 1e-4
-            elif iterations <= settings.free_steps:
-                ok = bool(np.isfinite(new))  # closes the defects left by the last stage
-            else:
-                ok = np.isfinite(new) and new < settings.watchdog_factor * walk.best[0]
             if ok:
                 out.accepted = True
                 out.step = float(np.max(np.abs(d), initial=0.0))

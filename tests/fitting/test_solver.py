@@ -14,6 +14,7 @@ from hframe_id.fitting.solver import (
     SolverState,
     _penalty_parameter,
     _Walk,
+    _watchdog_verdict,
 )
 from hframe_id.fitting.substep_plan import stopped_message
 from hframe_id.fitting.trust_region import trust_region_step
@@ -25,6 +26,55 @@ def test_penalty_parameter_makes_every_full_step_predict_a_decrease(rho):
         mu = _penalty_parameter(1.0, change, l1, rho)
         assert mu >= 1.0
         assert mu * l1 - change >= rho * mu * l1 - 1e-9 * abs(change)
+
+
+def test_the_watchdog_shrinks_the_region_on_every_step_it_refuses():
+    """An exact stage's watchdog accepts any finite merit in its first (free) steps, then a
+    merit below factor x the best; the region shrinks (ratio < 0.25, ``_adapt_region``) on
+    an increase and on every refusal, whatever the step's own ratio."""
+    factor = GaussNewtonSettings.watchdog_factor
+    # Refused past the free steps: above factor x best, though it halves the current merit.
+    assert _watchdog_verdict(0.52, 5e11, 1e12, 1e10, False, factor)[1] is False
+    assert _watchdog_verdict(0.52, 5e11, 1e12, 1e10, False, factor)[0] < 0.25
+    assert _watchdog_verdict(0.9, 5e11, 1e12, 1e10, False, factor)[0] < 0.25
+    # The same step in the free steps is accepted, the region kept.
+    assert _watchdog_verdict(0.52, 5e11, 1e12, 1e10, True, factor) == (0.52, True)
+    # Within factor x best: a decrease keeps the region (ratio at least 0.5), an increase
+    # shrinks it, both accepted.
+    assert _watchdog_verdict(0.1, 9.0, 10.0, 1.0, False, factor) == (0.5, True)
+    assert _watchdog_verdict(-2.0, 9.0, 8.0, 1.0, False, factor) == (-2.0, True)
+    # A non-finite merit is refused, its ratio left to ``_adapt_region``.
+    assert _watchdog_verdict(0.7, np.inf, 8.0, 1.0, True, factor) == (0.7, False)
+
+
+def test_a_step_the_watchdog_refuses_ends_the_trial_instead_of_repeating_it(shooting_setup):
+    """A walk whose current merit is far above factor x its best (as after the penalty
+    parameter rose on issue 25's test plant 1262; here a best of 0): every step is
+    refused. Each refusal must change the region or the damping, so the trial ends, not
+    accepted, after at most one step per factor of 10 between the node damping and its cap
+    (15 with the defaults); it repeated the same step for 35 min."""
+    problem, ms, nodes, _ = shooting_setup
+    theta = np.full(ms.nf, 0.3)
+    ev = ms.evaluate(nodes, theta, problem.smoothing)
+    state = SolverState(nodes.copy(), theta, np.ones(ms.nf, dtype=bool), evaluation=ev)
+    gn = GaussNewton(ms)
+    gn.set_smoothing(problem.smoothing)
+    walk = _Walk(ms, gn.links, None, 0.5, False)
+    # No merit is below factor x 0: every step refused. (A raise of the penalty parameter
+    # would merit the best again from its evaluation: mu is set above any raise.)
+    walk.best, walk.mu = (0.0, nodes, theta, ev), 1e15
+    evaluate, calls = gn._evaluate, []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        assert len(calls) <= 50, "the refused step is tried again and again"
+        return evaluate(*args, **kwargs)
+
+    gn._evaluate = counted
+    trial = gn._trial(walk, state, problem.smoothing, gn.settings.free_steps + 1)
+    assert not trial.accepted
+    settings = gn.settings
+    assert len(calls) <= 1 + np.log10(settings.max_node_damping / settings.node_damping)
 
 
 def _first_trial(ms, nodes, ev, smoothing):
