@@ -56,7 +56,11 @@ Between steps 2 and 3, a larger fit that ends worse than the smaller fit by more
 likelihood ratio has not converged: the smaller fit's end is a point of the larger model (the
 extra parameter where it does not bind), and a fit is never worse than a point it knows. The
 larger model is then fitted again from the smaller fit's end, the extra parameter at the
-larger model's reference value, and the better of its two fits goes on to step 3. On a 4 s
+larger model's reference value, and the better of its two fits goes on to step 3. A larger
+fit that ends with the extra parameter undetermined, from a start above the profile's lowest
+value, may have started where the limit hardly binds, where it has no gradient to move: it is
+fitted again from the same start with the extra parameter at that lowest value (a limit that
+binds can rise until it no longer does), and again the better fit goes on. On a 4 s
 designed record of a damped plant with a 7.7 A limit (issue 29's check, dev seed 1):
 hframe-8 -111,976, the limited fit from Table 4.2 -103,615, from the hframe-8 fit's end
 -128,354 with I_max 7.05 A (the plant's six steps: 7.03 A). On test plant 1195 and dev seed
@@ -106,11 +110,13 @@ class StructureChoice:
     failure : why the larger fit gave no result (it raised), else "".
     continued : the criterion of the smaller model fitted again from the larger fit's end
         (step 4 of the module's doc), where that fit was kept; else NaN.
-    first_larger : the criterion of the larger fit from step 1's start where it ended worse
-        than the smaller fit and its fit from the smaller fit's end did better (the module's
-        doc); ``start`` is then that second fit's start. Else NaN.
+    first_larger : the criterion of the larger fit from step 1's start where a second larger
+        fit ran and did better (the module's doc); ``start`` is then that second fit's start.
+        Else NaN.
     second_larger : the criterion of that second larger fit where it ran and did not do
         better than the first (infinite where it raised); else NaN.
+    second_from, second_why : where the second larger fit started, and why it ran (what the
+        first did); "" where it did not run.
     evidence_scale : the larger fit's extra parameter's textbook over robust variance, at
         most 1: what its criterion gain counts for (step 3); 1 where not fitted.
     """
@@ -129,6 +135,8 @@ class StructureChoice:
     continued: float = math.nan
     first_larger: float = math.nan
     second_larger: float = math.nan
+    second_from: str = ""
+    second_why: str = ""
     evidence_scale: float = 1.0
 
     @property
@@ -164,8 +172,8 @@ class StructureChoice:
         )
         if not math.isnan(self.first_larger):
             numbers += (
-                f"; fitted from the {self.asked} fit's end, where the first {self.larger} "
-                f"fit ended worse ({self.first_larger:.6g})"
+                f"; fitted from {self.second_from}, where the first {self.larger} fit "
+                f"{self.second_why} ({self.first_larger:.6g})"
             )
         if not math.isnan(self.second_larger):
             outcome = (
@@ -173,7 +181,7 @@ class StructureChoice:
                 if math.isinf(self.second_larger)
                 else f"no better ({self.second_larger:.6g})"
             )
-            numbers += f"; fitted again from the {self.asked} fit's end, {outcome}"
+            numbers += f"; fitted again from {self.second_from}, {outcome}"
         if self.chosen == self.larger:
             return f"{self.larger} kept: {numbers}"
         if not math.isnan(self.continued):
@@ -243,14 +251,11 @@ def _larger_start(
     points the extra parameter is profiled at, the user's start first, which wins unless
     another is better by more than ``LIKELIHOOD_RATIO_95`` (the start screen's rule)."""
     reference = load_parameter_file(declaration(larger).reference_file)
-    value = reference.values[extra]
-    octaves = math.log2(SPREAD[1])
-    steps = round(STEPS_PER_OCTAVE * octaves)
     profiled = []
     for base in bases:
         candidates = [
-            _in_larger(base, reference, extra, value * 2.0 ** (k / STEPS_PER_OCTAVE))
-            for k in range(-steps, steps + 1)
+            _in_larger(base, reference, extra, value)
+            for value in _profile_values(reference.values[extra])
         ]
         scores = [criterion(c) for c in candidates]
         best = min(range(len(candidates)), key=scores.__getitem__)
@@ -260,6 +265,13 @@ def _larger_start(
     (at_start, start), *others = profiled
     best_other, other = min(others, key=lambda scored: scored[0], default=(math.inf, None))
     return other if best_other < at_start - LIKELIHOOD_RATIO_95 else start
+
+
+def _profile_values(reference_value: float) -> list[float]:
+    """The extra parameter's values profiled at a start (step 1 of the module's doc):
+    ``reference_value`` x 2^(k / ``STEPS_PER_OCTAVE``) within ``SPREAD``, ascending."""
+    steps = round(STEPS_PER_OCTAVE * math.log2(SPREAD[1]))
+    return [reference_value * 2.0 ** (k / STEPS_PER_OCTAVE) for k in range(-steps, steps + 1)]
 
 
 def _profile_bases(initial: ParameterSet, screen: ScreenedStart | None) -> list[ParameterSet]:
@@ -314,16 +326,17 @@ def with_structure_choice(
         return _chosen(result, replace(choice, failure=failed))
     criteria[larger] = criterion(other.parameters, (replayed_starts(other),))
     first_larger = second_larger = math.nan
-    if criteria[larger] > criteria[asked] + LIKELIHOOD_RATIO_95:
-        again = _larger_from_smaller(recordings, result, larger, extra, options, fit)
+    second_from, second_why, second_start = _second_start(
+        result, start, other, criteria, extra, unit
+    )
+    if second_start is not None:
+        again = _larger_fit(recordings, second_start, extra, options, fit, second_from)
         second = (
-            math.inf
-            if again is None
-            else criterion(again[1].parameters, (replayed_starts(again[1]),))
+            math.inf if again is None else criterion(again.parameters, (replayed_starts(again),))
         )
         if second < criteria[larger]:
             first_larger = criteria[larger]
-            (start, other), criteria[larger] = again, second
+            start, other, criteria[larger] = second_start, again, second
         else:
             second_larger = second
     estimate = other.estimates[extra]
@@ -340,6 +353,8 @@ def with_structure_choice(
         chosen=asked,
         first_larger=first_larger,
         second_larger=second_larger,
+        second_from=second_from,
+        second_why=second_why,
         evidence_scale=_evidence_scale(estimate),
     )
     keep = other.success and choice.scaled_gain > LIKELIHOOD_RATIO_95 and estimate.identified
@@ -364,19 +379,36 @@ def _evidence_scale(estimate) -> float:
     return min(1.0, (textbook / robust) ** 2)
 
 
-def _larger_from_smaller(recordings, result, larger, extra, options, fit):
-    """(start, fit) of the larger model from the smaller fit ``result``'s end, the extra
-    parameter at the larger model's reference value; None if the fit raised."""
+def _second_start(result, start: ParameterSet, other, criteria: dict, extra: str, unit: str):
+    """(where, why, start) of a second fit of the larger model, or ("", "", None) where none
+    runs (the module's doc, between steps 2 and 3). Where the first larger fit ``other`` ended
+    worse than the smaller fit ``result`` by more than the likelihood ratio, it has not
+    converged: from the smaller fit's end, the extra parameter at the larger model's
+    reference value. Where it ended with the extra parameter undetermined from a start above
+    the profile's lowest value: from ``start`` with the extra parameter at that lowest value.
+    A current limit that hardly binds at its start has no gradient to move (test plant 1307
+    of issue 25: a 6.2 A limit, the fit from 9.51 A ended at 9.59 A with relative std 3.5e16;
+    from 4, 5.66 and 8 A it found 6.185 A), and one that binds can rise until it no longer
+    does."""
+    smaller, larger = result.variant, other.variant
     reference = load_parameter_file(declaration(larger).reference_file)
-    start = _in_larger(result.parameters, reference, extra, reference.values[extra])
-    progress = labelled(
-        progress_sink(options), f"with {extra}, from the {result.variant} fit's end"
-    )
+    if criteria[larger] > criteria[smaller] + LIKELIHOOD_RATIO_95:
+        from_end = _in_larger(result.parameters, reference, extra, reference.values[extra])
+        return f"the {smaller} fit's end", "ended worse", from_end
+    lowest = _profile_values(reference.values[extra])[0]
+    if not other.estimates[extra].identified and start.values[extra] > lowest:
+        where = f"{extra} {lowest:.3g} {unit}, its profile's lowest"
+        return where, f"ended with {extra} undetermined", start.replace_values(**{extra: lowest})
+    return "", "", None
+
+
+def _larger_fit(recordings, start: ParameterSet, extra: str, options: FitOptions, fit, where: str):
+    """The larger model's second fit from ``start`` (labelled with ``where`` it starts), or
+    None if it raised (the first larger fit and the smaller one are finished: they stand)."""
+    progress = labelled(progress_sink(options), f"with {extra}, from {where}")
     try:
-        return start, fit(
-            recordings, start, replace(larger_options(options, extra), progress=progress)
-        )
-    except Exception:  # the first larger fit and the smaller one are finished: they stand
+        return fit(recordings, start, replace(larger_options(options, extra), progress=progress))
+    except Exception:
         return None
 
 

@@ -87,7 +87,11 @@ def test_hframe8_nests_in_the_current_limited_variant():
         ),
         ({"start": None, "chosen": "hframe-8"}, "hframe-8-current-limit not tried", "x/÷2"),
         (
-            {"chosen": "hframe-8", "second_larger": math.inf},
+            {
+                "chosen": "hframe-8",
+                "second_larger": math.inf,
+                "second_from": "the hframe-8 fit's end",
+            },
             "hframe-8 kept",
             "fitted again from the hframe-8 fit's end, which raised",
         ),
@@ -217,8 +221,12 @@ def test_a_better_larger_fit_with_its_limit_undetermined_is_a_start_for_the_smal
 
     options = FitOptions().for_model("hframe-8")
     kept = with_structure_choice([], table, options, first, fit=fit)
-    assert starts[1].variant == "hframe-8" and starts[1].values["k_l"] == 11000.0
+    # I_max ended undetermined from 8 A: the limited model fitted again from 4 A (the
+    # profile's lowest) first, no better here (the same end), then the continuation.
+    assert starts[1].variant == LARGER and starts[1].values["I_max"] == 4.0
+    assert starts[2].variant == "hframe-8" and starts[2].values["k_l"] == 11000.0
     choice = kept.diagnostics.structure
+    assert choice.second_larger == -1500.0 and "fitted again from I_max 4 A" in kept.message
     assert choice.chosen == "hframe-8"
     if kept_again:
         assert kept.parameters is again.parameters and kept.initial is table
@@ -228,6 +236,62 @@ def test_a_better_larger_fit_with_its_limit_undetermined_is_a_start_for_the_smal
     else:
         assert kept.parameters is first.parameters and math.isnan(choice.continued)
         assert "I_max poorly determined" in kept.message
+
+
+@pytest.mark.parametrize("first_start_amps", [8.0, 4.0])
+def test_a_limit_that_ended_undetermined_is_fitted_again_from_the_profiles_lowest_value(
+    monkeypatch, small_result, first_start_amps
+):
+    """The limited fit from step 1's start (I_max 8 A) ends with I_max undetermined (-1100,
+    a limit that hardly binds has no gradient): fitted again from the same start with I_max
+    at the profile's lowest value (4 A: the reference 8 A / 2), it finds the limit (-1500,
+    identified) and is kept, saying where it started. From a start already at 4 A no
+    second fit runs."""
+    from hframe_id.fitting.noise_rounds import NoiseReport
+    from hframe_id.fitting.result import ParameterEstimate
+
+    table = load_parameter_file(models_dir() / "hframe-8-table4.2.yaml")
+    limited = load_parameter_file(models_dir() / "hframe-8-current-limit.yaml")
+    first = small_result().with_diagnostics(noise=NoiseReport(rounds=2, channels={}))
+    idle = ParameterEstimate("I_max", "A", 8.0, 8.1, 1e16, (0.0, math.inf), False, True, 1e15)
+    found = ParameterEstimate("I_max", "A", 4.0, 6.2, 0.007, (6.19, 6.21), True, True, 0.001)
+    stuck = small_result(
+        parameters=limited.replace_values(k_l=9000.0, I_max=8.1),
+        estimates={**first.estimates, "I_max": idle},
+    )
+    binding = small_result(
+        parameters=limited.replace_values(k_l=12500.0, I_max=6.2),
+        estimates={**first.estimates, "I_max": found},
+    )
+    start = limited.replace_values(I_max=first_start_amps)
+    criteria = {
+        id(first.parameters): -1000.0,
+        id(stuck.parameters): -1100.0,
+        id(binding.parameters): -1500.0,
+    }
+    _judged_by(monkeypatch, criteria, start)
+    starts = []
+
+    def fit(recordings, start_, options):
+        starts.append(start_)
+        if start_.variant != LARGER:
+            raise RuntimeError("the continuation is not what this test is about")
+        return stuck if start_.values["I_max"] == 8.0 else binding
+
+    options = FitOptions().for_model("hframe-8")
+    kept = with_structure_choice([], table, options, first, fit=fit)
+    choice = kept.diagnostics.structure
+    if first_start_amps == 4.0:
+        assert len(starts) == 1 and choice.chosen == LARGER and choice.second_from == ""
+        return
+    assert [s.values["I_max"] for s in starts] == [8.0, 4.0]
+    assert starts[1].values["k_l"] == limited.values["k_l"]  # step 1's start otherwise
+    assert choice.chosen == LARGER and kept.parameters is binding.parameters
+    assert choice.first_larger == -1100.0 and choice.start is starts[1]
+    assert (
+        "fitted from I_max 4 A, its profile's lowest, where the first hframe-8-current-limit "
+        "fit ended with I_max undetermined (-1100)" in kept.message
+    )
 
 
 @pytest.mark.parametrize(("second_criterion", "refitted"), [(-1500.0, True), (-800.0, False)])
