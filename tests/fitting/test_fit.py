@@ -154,3 +154,51 @@ def test_a_fit_off_the_stiffness_wall_is_left_as_it_is(monkeypatch, table):
     calm = _Ended(table, table)
     assert _off_the_wall([], table, FitOptions().for_model(table.variant), None, calm) is calm
     assert calls == []
+
+
+def _judged(monkeypatch, small_result, model, still, held, success=True):
+    """``fit._explaining_the_data`` on a hand-made result whose replay, model unforced and
+    held means score ``model``, ``still`` and ``held`` (chi^2 / 2)."""
+    from hframe_id.fitting import fit as fit_module
+    from hframe_id.fitting.known_points import KnownPointsReport
+
+    class Judge:
+        def __call__(self, params, starts):
+            return model
+
+        def against_unforced(self, params, starts):
+            return model, still, held
+
+    monkeypatch.setattr(fit_module.Criterion, "of", classmethod(lambda cls, *a: Judge()))
+    monkeypatch.setattr(fit_module, "replayed_starts", lambda result: [None])
+    report = KnownPointsReport("criterion", model, {})
+    result = small_result(success=success).with_diagnostics(known_points=report)
+    return fit_module._explaining_the_data([], result)
+
+
+def test_a_success_must_beat_its_model_unforced_and_the_held_means(monkeypatch, small_result):
+    """1.92 (the 95 % likelihood ratio) below both, or the fit fails saying which it did not
+    beat: its inputs held (they drive nothing under the model), or only the held means (a
+    plant friction holds nearly still: test plant 1314, 12,000 against 15,739 unforced and
+    3,161 held)."""
+    judged = _judged(monkeypatch, small_result, 100.0, 102.0, 102.0)
+    assert judged.success and judged.message == "converged"
+    assert judged.diagnostics.known_points.replayed == 100.0
+    judged = _judged(monkeypatch, small_result, 100.0, 101.0, 500.0)
+    assert not judged.success
+    assert "no closer to them than with its inputs held at their start" in judged.message
+    assert "the inputs do not drive what the outputs show" in judged.message
+    judged = _judged(monkeypatch, small_result, 12000.0, 15739.0, 3161.0)
+    assert not judged.success
+    assert judged.message.startswith("the fitted model explains none of the data")
+    assert "no closer to them than each channel held at its mean" in judged.message
+    assert "closer than with its inputs held at their start (15739)" in judged.message
+    assert "the records show motion this model does not reproduce" in judged.message
+
+
+def test_a_failed_fit_says_it_explains_none_of_the_data_after_its_own_message(
+    monkeypatch, small_result
+):
+    judged = _judged(monkeypatch, small_result, 100.0, 100.0, 90.0, success=False)
+    assert not judged.success
+    assert judged.message.startswith("converged; it explains none of the data: ")

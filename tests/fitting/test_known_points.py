@@ -11,6 +11,7 @@ from hframe_id.fitting.known_points import (
     held_criterion,
     reference_sets,
     simulation_criterion,
+    unforced,
 )
 from hframe_id.models import build_model
 from hframe_id.validation.replay import channels
@@ -137,27 +138,42 @@ def test_a_fits_free_runs_are_simulated_once(monkeypatch, table, steps):
     assert len(runs) == 5
 
 
-def test_against_held_judges_the_model_and_the_held_mean_under_the_fits_levels(truth, steps):
-    """Both predictions are weighed by the levels the fit reports, per recording (here the
-    second recording's at twice the first's), not each by its own: the plant explains its
-    two x-steps; with the voltages zeroed (motion kept) its simulation stays at rest and
-    does not beat the held mean, the best constant."""
+def test_against_unforced_judges_the_model_its_inputs_held_and_the_held_mean_under_the_fits_levels(
+    truth, steps
+):
+    """All three predictions are weighed by the levels the fit reports, per recording (here
+    the second recording's at twice the first's), not each by its own: the plant explains
+    its two x-steps, better than with its inputs held at their start (at rest: it stays
+    there) and than the held means; with the voltages zeroed (motion kept) the model and
+    the model unforced are one simulation, and the held mean, the best constant, beats it."""
 
     names = channels(build_model("hframe-8"), steps[0]).names
     levels = ({name: 1e-5 for name in names}, {name: 2e-5 for name in names})
     criterion = Criterion(tuple(steps), levels[0], {}, True, fit_levels=levels)
-    model, held = criterion.against_held(truth, None)
+    model, still, held = criterion.against_unforced(truth, None)
     assert model == pytest.approx(simulation_criterion(truth, steps, levels), rel=1e-12)
+    assert still == pytest.approx(simulation_criterion(truth, unforced(steps), levels), rel=1e-12)
     assert held == pytest.approx(held_criterion(steps, levels, None, False, "hframe-8"), rel=1e-12)
-    assert model < held - 1.92
-    still = tuple(dataclasses.replace(rec, inputs=np.zeros_like(rec.inputs)) for rec in steps)
-    model, held = Criterion(still, levels[0], {}, True, fit_levels=levels).against_held(truth, None)
+    assert model < held - 1.92 and model < still - 1.92
+    zeroed = tuple(dataclasses.replace(rec, inputs=np.zeros_like(rec.inputs)) for rec in steps)
+    criterion = Criterion(zeroed, levels[0], {}, True, fit_levels=levels)
+    model, still, held = criterion.against_unforced(truth, None)
+    assert model == pytest.approx(still, rel=1e-12)
     assert held < model
 
 
-def test_against_held_without_the_fits_levels_uses_the_criterions_std(truth, steps):
+def test_unforced_holds_every_input_at_its_first_value_and_keeps_the_rest(steps):
+    held = unforced(steps)
+    for rec, still in zip(steps, held, strict=True):
+        assert np.array_equal(still.inputs, np.broadcast_to(rec.inputs[:1], rec.inputs.shape))
+        assert np.array_equal(still.outputs, rec.outputs) and still.time_s is rec.time_s
+    assert np.ptp(steps[0].inputs) > 0  # the steps do move their inputs
+
+
+def test_against_unforced_without_the_fits_levels_uses_the_criterions_std(truth, steps):
 
     std = {name: 1e-5 for name in channels(build_model("hframe-8"), steps[0]).names}
-    model, held = Criterion(tuple(steps), std, {}, False).against_held(truth, None)
+    model, still, held = Criterion(tuple(steps), std, {}, False).against_unforced(truth, None)
     assert model == pytest.approx(simulation_criterion(truth, steps, std), rel=1e-12)
+    assert still == pytest.approx(simulation_criterion(truth, unforced(steps), std), rel=1e-12)
     assert held == pytest.approx(held_criterion(steps, std, None, False, "hframe-8"), rel=1e-12)
