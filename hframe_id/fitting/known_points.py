@@ -332,7 +332,12 @@ class Criterion:
         the inputs drive nothing), and of each channel held at its mean (``held_criterion``).
         The first two are the test "do the inputs drive what the outputs show under this
         model"; the third, the reference of a 0 % simulation fit, "does the replay reproduce
-        the records better than a flat line". A plant held nearly still by friction (test
+        the records better than a flat line". All under the same levels: per recording and
+        channel a difference is then N / 2 (v - r), v and r the two mean squares in those
+        levels (r about 1 at the fit's own point), so a channel held still by static friction
+        that no simulation follows to its sensor's noise counts against a model by at most
+        N / 2, where with each prediction at its own levels it counted N / 2 ln(1 / v)
+        without bound (dev plant 57 of issue 25). A plant held nearly still by friction (test
         plant 1314: motor angles within 0.04 rad, two records below one encoder step) is
         replayed by its fit better than unforced (12,000 against 15,739) and worse than its
         held means (3,161), as by its own reduction with its current limit (16,486)."""
