@@ -146,8 +146,8 @@ def _explaining_the_data(
     current-limited pulses whose replay from rest was worse than a flat line
     (docs/studies/2026-11-26-replayed-verdict.md). The two comparisons part where friction
     holds a plant nearly still: test plant 1314's replay beats its model unforced and not the
-    held means, and so does its own reduction
-    (docs/studies/2026-11-29-held-still-and-unforced.md)."""
+    held means, which no point of the model tried comes near, the plant's own reduction
+    included (docs/studies/2026-11-29-held-still-and-unforced.md)."""
     criterion = Criterion.of(result, recordings, simulations)
     starts = replayed_starts(result)
     replayed = criterion(result.parameters, (starts,))
