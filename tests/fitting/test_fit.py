@@ -156,6 +156,44 @@ def test_a_fit_off_the_stiffness_wall_is_left_as_it_is(monkeypatch, table):
     assert calls == []
 
 
+def test_a_continuation_from_a_known_point_that_ends_against_the_wall_is_no_success(
+    monkeypatch, table
+):
+    """A fit that ended worse than a known point continues from it; where that continuation
+    ends against the stiffness wall it is restarted off it (``_fit_from``) and, still there,
+    is a failure, so the fit fails saying it ended worse (test plant 1326 of issue 25: such
+    a continuation was called a success, held out 19 x the plant's reduction)."""
+    from hframe_id.fitting import fit as fit_module
+
+    first, restart, calls = _wall_strategy(monkeypatch, table, 40.0, restart_at_wall=True)
+    point = SimpleNamespace(label="known point 1", parameters=table, criterion=50.0)
+
+    def fit_widening(recordings, initial, options, judge=None):
+        calls.append(initial)
+        return first if len(calls) == 1 else restart
+
+    class Judge:
+        name = "criterion"
+
+        def __call__(self, params, starts):
+            return 100.0
+
+    monkeypatch.setattr(fit_module, "_fit_widening", fit_widening)
+    monkeypatch.setattr(fit_module.Criterion, "of", classmethod(lambda cls, *a: Judge()))
+    monkeypatch.setattr(fit_module, "judged_starts", lambda result: None)
+    monkeypatch.setattr(fit_module, "_known_candidates", lambda *a: [])
+    monkeypatch.setattr(fit_module, "known_points", lambda *a: [point])
+    ended = _Ended(table.replace_values(k_b=7000.0), table)
+    ended.with_diagnostics = lambda **kw: ended
+    options = FitOptions().for_model(table.variant)
+    out = fit_module._never_worse_than_known([], table, options, ended, None)
+    assert len(calls) == 2  # the continuation, then its restart off the wall
+    assert calls[0] is table and calls[1].values["J_M1"] == table.values["J_M1"]
+    assert not out.success
+    assert out.message.startswith("did not converge: the fit ends worse than known point 1")
+    assert out.message.endswith("a fit continued from there ends at inf")
+
+
 def _judged(monkeypatch, small_result, model, still, held, success=True):
     """``fit._explaining_the_data`` on a hand-made result whose replay, model unforced and
     held means score ``model``, ``still`` and ``held`` (chi^2 / 2)."""
